@@ -1,0 +1,63 @@
+#pragma once
+// YAML configuration with strict keys. Each stage owns a Config struct whose member
+// initialisers are the only defaults; a `readConfig(ConfigSection&, XConfig&)` function next to
+// it overwrites the members present in the file. After every stage has read its section,
+// ConfigDocument::checkAllKeysUsed() rejects any key nobody read (a typo, a removed option),
+// naming the key and the file, as cartographer's "every key used exactly once" check does.
+#include <filesystem>
+#include <memory>
+#include <string>
+#include <string_view>
+#include <vector>
+
+namespace tessera::core {
+
+class ConfigDocument;
+
+// A map inside a config document, e.g. the `fusion:` block. Cheap to copy.
+// Not thread-safe; configuration is read once, before the pipeline starts.
+class ConfigSection {
+ public:
+  // Each overload leaves `value` unchanged when the key is absent and throws ConfigError
+  // (naming the file, the key and the expected type) when the value has the wrong type.
+  void read(std::string_view key, double& value) const;
+  void read(std::string_view key, int& value) const;
+  void read(std::string_view key, bool& value) const;
+  void read(std::string_view key, std::string& value) const;
+
+  // The sub-map under `key` (empty when absent).
+  ConfigSection section(std::string_view key) const;
+
+  struct State;  // the parsed document and the keys read so far (defined in config.cpp)
+
+ private:
+  friend class ConfigDocument;
+  ConfigSection(std::shared_ptr<State> document, std::string path);
+  std::shared_ptr<State> document_;
+  std::string path_;  // dotted key path of this section, "" for the root
+};
+
+class ConfigDocument {
+ public:
+  // Parses `path`; throws ConfigError when it is missing or not valid YAML.
+  static ConfigDocument load(const std::filesystem::path& path);
+  // A document with no keys: every Config keeps its defaults.
+  static ConfigDocument empty();
+  // Parses YAML text; `origin` names it in error messages.
+  static ConfigDocument fromString(const std::string& yaml, const std::string& origin);
+
+  ConfigSection root() const;
+  const std::string& origin() const;
+
+  // Throws ConfigError naming every key in the file that no read() or section() consumed.
+  void checkAllKeysUsed() const;
+  // Dotted paths of keys that were asked for but are not in the file (used to check that
+  // config/default.yaml documents every key).
+  std::vector<std::string> keysAskedButAbsent() const;
+
+ private:
+  explicit ConfigDocument(std::shared_ptr<ConfigSection::State> state);
+  std::shared_ptr<ConfigSection::State> state_;
+};
+
+}  // namespace tessera::core

@@ -1,0 +1,21 @@
+#pragma once
+// The one place that knows the topology: source -> limiter -> fusion -> stats sink, as a
+// tbb::flow::graph inside a task_arena of the requested concurrency.
+#include "tessera/pipeline/stages.h"
+
+namespace tessera::pipeline {
+
+struct GraphOptions {
+  int threads = 0;               // 0: hardware threads
+  int max_frames_in_flight = 4;  // replay back-pressure (limiter_node)
+};
+
+// Runs the stages over the whole stream, then flushes them in order (end of stream).
+// Blocks until done.
+void runGraph(SourceStage& source, FusionStage& fusion, StatsSink& sink,
+              const GraphOptions& options);
+
+// Hardware threads, at least 1.
+int defaultThreadCount();
+
+}  // namespace tessera::pipeline

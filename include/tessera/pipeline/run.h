@@ -1,0 +1,55 @@
+#pragma once
+// `tessera run` as a library call: source in, OUT/ files and a summary out.
+#include <cstddef>
+#include <filesystem>
+#include <optional>
+#include <string>
+
+#include "tessera/core/frame_source.h"
+#include "tessera/pipeline/run_config.h"
+#include "tessera/pipeline/stages.h"
+
+namespace tessera::pipeline {
+
+struct RunOptions {
+  std::filesystem::path out_dir = "tessera_out";
+  int threads = 0;  // 0: hardware threads
+  std::optional<std::size_t> max_frames;
+  StatsSink::ProgressCallback on_progress;  // may be empty
+};
+
+struct StageFigures {
+  std::string name;
+  std::size_t calls = 0;
+  double mean_ms = 0.0;
+  double median_ms = 0.0;
+  double alone_fps = 0.0;
+};
+
+struct RunSummary {
+  std::string source;
+  std::size_t frames = 0;      // frames that went through the pipeline
+  std::size_t frames_bad = 0;  // unreadable frames, skipped
+  std::size_t frames_integrated = 0;
+  std::size_t frames_without_pose = 0;
+  std::string source_end_problem;  // non-empty when the source ended abnormally
+  double wall_s = 0.0;
+  double fps = 0.0;
+  double peak_rss_mb = 0.0;
+  std::size_t tsdf_bytes = 0;
+  std::size_t mesh_vertices = 0;
+  std::vector<StageFigures> stages;
+};
+
+// Runs the whole pipeline and writes OUT/mesh.ply, OUT/stats.jsonl and OUT/report.json.
+// Throws core::Error naming the file when an output cannot be written.
+RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
+                       const RunOptions& options);
+
+// Writes the report.json object (docs/METRICS.md): figures this stage cannot compute are null.
+void writeReport(const RunSummary& summary, const std::filesystem::path& path);
+
+// Peak resident set size of this process so far, in MB.
+double peakRssMb();
+
+}  // namespace tessera::pipeline

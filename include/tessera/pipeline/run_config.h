@@ -1,0 +1,28 @@
+#pragma once
+// Every tunable of `tessera run`, gathered from the stages' own Config structs.
+#include <filesystem>
+#include <optional>
+
+#include "tessera/core/config.h"
+#include "tessera/fusion/tsdf_map.h"
+
+namespace tessera::pipeline {
+
+struct PipelineConfig {
+  int max_frames_in_flight = 4;  // replay back-pressure: frames between source and sink
+};
+
+void readConfig(const core::ConfigSection& section, PipelineConfig& config);
+
+struct RunConfig {
+  PipelineConfig pipeline;
+  fusion::TsdfConfig tsdf;
+};
+
+// Reads every section of `doc` into a RunConfig and rejects unknown keys.
+RunConfig readRunConfig(const core::ConfigDocument& doc);
+
+// Defaults when `path` is empty, otherwise the file. Throws core::ConfigError.
+RunConfig loadRunConfig(const std::optional<std::filesystem::path>& path);
+
+}  // namespace tessera::pipeline

@@ -1,0 +1,109 @@
+#pragma once
+// The stages of `tessera run`, as plain classes with a narrow process()/flush() call.
+// They know nothing of TBB: flow_graph.h wires them. Each stage is called by one node at a
+// time (serial nodes), so none of them locks.
+#include <cstddef>
+#include <cstdint>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <optional>
+#include <string>
+
+#include "tessera/core/frame_source.h"
+#include "tessera/fusion/tsdf_map.h"
+#include "tessera/pipeline/stage_timer.h"
+
+namespace tessera::pipeline {
+
+// Pulls frames from a FrameSource; bad frames are counted, logged and skipped.
+class SourceStage {
+ public:
+  SourceStage(core::FrameSource& source, std::optional<std::size_t> max_frames);
+
+  // The next good frame, or nothing at the end of the stream.
+  std::optional<core::Frame> next();
+
+  std::size_t framesRead() const { return frames_read_; }
+  std::size_t badFrames() const { return bad_frames_; }
+  // Set when the source ended abnormally (truncated recording, lost device).
+  const std::string& endProblem() const { return end_problem_; }
+  const StageTimer& timer() const { return timer_; }
+
+ private:
+  core::FrameSource& source_;
+  std::optional<std::size_t> max_frames_;
+  std::size_t frames_read_ = 0;
+  std::size_t bad_frames_ = 0;
+  std::string end_problem_;
+  StageTimer timer_;
+};
+
+// A frame after fusion, with what the sink reports about it.
+struct FusedFrame {
+  core::Frame frame;
+  bool integrated = false;
+  std::string skip_reason;  // why the frame was not integrated
+  std::size_t tsdf_bytes = 0;
+  double fusion_ms = 0.0;
+};
+
+// Integrates each frame into the TSDF at its pose. Until camera tracking exists the pose is
+// the recording's ground truth; frames without one are counted and not integrated.
+class FusionStage {
+ public:
+  FusionStage(const fusion::TsdfConfig& config, int thread_cap);
+
+  FusedFrame process(core::Frame frame);
+  void flush() {}
+
+  const fusion::TsdfMap& map() const { return map_; }
+  std::size_t framesIntegrated() const { return integrated_; }
+  std::size_t framesSkipped() const { return skipped_; }
+  const StageTimer& timer() const { return timer_; }
+
+ private:
+  fusion::TsdfMap map_;
+  std::size_t integrated_ = 0;
+  std::size_t skipped_ = 0;
+  StageTimer timer_;
+};
+
+// What the sink tells a progress display after each frame.
+struct Progress {
+  std::size_t frames_done = 0;
+  std::optional<std::size_t> frames_total;
+  double elapsed_s = 0.0;
+  std::size_t map_bytes = 0;
+};
+
+// Writes one stats.jsonl line per frame and keeps the running totals.
+class StatsSink {
+ public:
+  using ProgressCallback = std::function<void(const Progress&)>;
+
+  // Throws core::Error naming the file when it cannot be created.
+  StatsSink(const std::filesystem::path& stats_path, std::optional<std::size_t> frames_total,
+            ProgressCallback on_progress);
+
+  void process(const FusedFrame& fused);
+  // Closes the stats file; throws core::Error naming it when writing failed (disk full).
+  void flush();
+
+  std::size_t framesDone() const { return frames_done_; }
+  std::size_t mapBytes() const { return map_bytes_; }
+  const StageTimer& timer() const { return timer_; }
+
+ private:
+  std::filesystem::path stats_path_;
+  std::ofstream stats_;
+  std::optional<std::size_t> frames_total_;
+  ProgressCallback on_progress_;
+  std::chrono::steady_clock::time_point start_;
+  std::size_t frames_done_ = 0;
+  std::size_t map_bytes_ = 0;
+  bool write_failed_ = false;
+  StageTimer timer_;
+};
+
+}  // namespace tessera::pipeline

@@ -1,0 +1,7 @@
+#!/usr/bin/env bash
+# Builds tessera and runs the whole test suite with ctest.
+# Extra arguments go to CMake's configure step (e.g. -DTESSERA_SANITIZE=ON).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+./scripts/build.sh "$@"
+ctest --test-dir "${BUILD_DIR:-build}" --output-on-failure -j "$(nproc)"

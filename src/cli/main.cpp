@@ -1,0 +1,29 @@
+// The `tessera` command: one subcommand per job.
+#include <spdlog/spdlog.h>
+#include <CLI/CLI.hpp>
+
+#include "run_command.h"
+#include "tessera/core/error.h"
+#include "tessera/core/log.h"
+
+int main(int argc, char** argv) {
+  CLI::App app{"tessera: compact textured maps from RGB-D sensors"};
+  app.set_version_flag("--version", TESSERA_VERSION);
+  app.require_subcommand(1);
+  std::string log_level = "info";
+  app.add_option("--log-level", log_level, "trace, debug, info, warn, error or off")
+      ->capture_default_str();
+
+  tessera::cli::RunArguments run_args;
+  CLI::App* run = tessera::cli::addRunCommand(app, run_args);
+
+  CLI11_PARSE(app, argc, argv);
+  try {
+    tessera::core::initLogging(log_level);
+  } catch (const tessera::core::Error& e) {
+    fmt::print(stderr, "tessera: {}\n", e.what());
+    return 2;
+  }
+  if (run->parsed()) return tessera::cli::runCommand(run_args);
+  return 0;
+}

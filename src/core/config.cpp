@@ -1,0 +1,158 @@
+#include "tessera/core/config.h"
+
+#include <set>
+
+#include <fmt/format.h>
+#include <yaml-cpp/yaml.h>
+
+#include "tessera/core/error.h"
+
+namespace tessera::core {
+
+struct ConfigSection::State {
+  YAML::Node root;
+  std::string origin;
+  std::set<std::string> used;    // dotted paths consumed by read() or section()
+  std::set<std::string> absent;  // dotted paths asked for but not present
+};
+
+namespace {
+
+std::string joinPath(const std::string& parent, std::string_view key) {
+  return parent.empty() ? std::string(key) : parent + "." + std::string(key);
+}
+
+// Walks the dotted path from `node`; returns an undefined node when any part is missing.
+// (Recursive on purpose: assigning yaml-cpp nodes would rewrite the tree, not rebind.)
+YAML::Node lookup(const YAML::Node& node, std::string_view path) {
+  if (path.empty()) return node;
+  if (!node.IsMap()) return YAML::Node(YAML::NodeType::Undefined);
+  const std::size_t dot = path.find('.');
+  const YAML::Node child = node[std::string(path.substr(0, dot))];
+  if (!child) return YAML::Node(YAML::NodeType::Undefined);
+  return dot == std::string_view::npos ? child : lookup(child, path.substr(dot + 1));
+}
+
+template <typename T>
+void readScalar(ConfigSection::State& state, const std::string& path, T& value,
+                const char* type_name) {
+  const YAML::Node node = lookup(state.root, path);
+  if (!node.IsDefined() || node.IsNull()) {
+    state.absent.insert(path);
+    return;
+  }
+  state.used.insert(path);
+  if (!node.IsScalar()) {
+    throw ConfigError(fmt::format("{}: key '{}' must be {}", state.origin, path, type_name));
+  }
+  try {
+    value = node.as<T>();
+  } catch (const YAML::Exception&) {
+    throw ConfigError(fmt::format("{}: key '{}' must be {}, got '{}'", state.origin, path,
+                                  type_name, node.Scalar()));
+  }
+}
+
+void collectUnused(const YAML::Node& node, const std::string& path,
+                   const std::set<std::string>& used, std::vector<std::string>& unused) {
+  if (node.IsMap()) {
+    for (const auto& entry : node) {
+      const std::string child = joinPath(path, entry.first.as<std::string>());
+      if (entry.second.IsMap() && !used.contains(child)) {
+        unused.push_back(child);
+      } else if (entry.second.IsMap()) {
+        collectUnused(entry.second, child, used, unused);
+      } else if (!used.contains(child)) {
+        unused.push_back(child);
+      }
+    }
+  }
+}
+
+}  // namespace
+
+ConfigSection::ConfigSection(std::shared_ptr<State> document, std::string path)
+    : document_(std::move(document)), path_(std::move(path)) {}
+
+void ConfigSection::read(std::string_view key, double& value) const {
+  readScalar(*document_, joinPath(path_, key), value, "a number");
+}
+void ConfigSection::read(std::string_view key, int& value) const {
+  readScalar(*document_, joinPath(path_, key), value, "an integer");
+}
+void ConfigSection::read(std::string_view key, bool& value) const {
+  readScalar(*document_, joinPath(path_, key), value, "true or false");
+}
+void ConfigSection::read(std::string_view key, std::string& value) const {
+  readScalar(*document_, joinPath(path_, key), value, "a string");
+}
+
+ConfigSection ConfigSection::section(std::string_view key) const {
+  const std::string path = joinPath(path_, key);
+  const YAML::Node node = lookup(document_->root, path);
+  if (node.IsDefined() && !node.IsNull()) {
+    if (!node.IsMap()) {
+      throw ConfigError(
+          fmt::format("{}: key '{}' must be a map of settings", document_->origin, path));
+    }
+    document_->used.insert(path);
+  }
+  return ConfigSection(document_, path);
+}
+
+ConfigDocument::ConfigDocument(std::shared_ptr<ConfigSection::State> state)
+    : state_(std::move(state)) {}
+
+ConfigDocument ConfigDocument::fromString(const std::string& yaml, const std::string& origin) {
+  auto state = std::make_shared<ConfigSection::State>();
+  state->origin = origin;
+  try {
+    state->root = YAML::Load(yaml);
+  } catch (const YAML::Exception& e) {
+    throw ConfigError(fmt::format("{}: not valid YAML: {}", origin, e.what()));
+  }
+  if (state->root.IsDefined() && !state->root.IsNull() && !state->root.IsMap()) {
+    throw ConfigError(fmt::format("{}: the top level must be a map of sections", origin));
+  }
+  return ConfigDocument(std::move(state));
+}
+
+ConfigDocument ConfigDocument::load(const std::filesystem::path& path) {
+  auto state = std::make_shared<ConfigSection::State>();
+  state->origin = path.string();
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(path, ec)) {
+    throw ConfigError(fmt::format("{}: config file not found", path.string()));
+  }
+  try {
+    state->root = YAML::LoadFile(path.string());
+  } catch (const YAML::Exception& e) {
+    throw ConfigError(fmt::format("{}: not valid YAML: {}", path.string(), e.what()));
+  }
+  if (state->root.IsDefined() && !state->root.IsNull() && !state->root.IsMap()) {
+    throw ConfigError(fmt::format("{}: the top level must be a map of sections", path.string()));
+  }
+  return ConfigDocument(std::move(state));
+}
+
+ConfigDocument ConfigDocument::empty() { return fromString("{}", "(defaults)"); }
+
+ConfigSection ConfigDocument::root() const { return ConfigSection(state_, ""); }
+
+const std::string& ConfigDocument::origin() const { return state_->origin; }
+
+void ConfigDocument::checkAllKeysUsed() const {
+  std::vector<std::string> unused;
+  collectUnused(state_->root, "", state_->used, unused);
+  if (unused.empty()) return;
+  throw ConfigError(
+      fmt::format("{}: unknown key{} '{}' (misspelled, or not a tessera setting; "
+                  "config/default.yaml lists every key)",
+                  state_->origin, unused.size() > 1 ? "s" : "", fmt::join(unused, "', '")));
+}
+
+std::vector<std::string> ConfigDocument::keysAskedButAbsent() const {
+  return {state_->absent.begin(), state_->absent.end()};
+}
+
+}  // namespace tessera::core

@@ -1,0 +1,135 @@
+#include "tessera/fusion/tsdf_map.h"
+
+#include <cstring>
+
+#include <fmt/format.h>
+#include <omp.h>
+#include <open3d/camera/PinholeCameraIntrinsic.h>
+#include <open3d/geometry/Image.h>
+#include <open3d/geometry/RGBDImage.h>
+#include <open3d/geometry/TriangleMesh.h>
+#include <open3d/io/TriangleMeshIO.h>
+#include <open3d/pipelines/integration/ScalableTSDFVolume.h>
+#include <open3d/pipelines/integration/UniformTSDFVolume.h>
+#include <opencv2/imgproc.hpp>
+
+#include "tessera/core/error.h"
+
+namespace tessera::fusion {
+
+namespace o3d = open3d;
+
+struct TsdfMap::Volume {
+  o3d::pipelines::integration::ScalableTSDFVolume tsdf;
+  Volume(double voxel, double trunc, int block_resolution)
+      : tsdf(voxel, trunc, o3d::pipelines::integration::TSDFVolumeColorType::RGB8,
+             block_resolution) {}
+};
+
+void readConfig(const core::ConfigSection& section, TsdfConfig& config) {
+  section.read("voxel_size_m", config.voxel_size_m);
+  section.read("truncation_m", config.truncation_m);
+  section.read("min_depth_m", config.min_depth_m);
+  section.read("max_depth_m", config.max_depth_m);
+  section.read("block_resolution", config.block_resolution);
+  if (config.voxel_size_m <= 0.0 || config.truncation_m < config.voxel_size_m) {
+    throw core::ConfigError(
+        "tsdf: voxel_size_m must be positive and truncation_m at least one voxel");
+  }
+  if (config.min_depth_m < 0.0 || config.max_depth_m <= config.min_depth_m) {
+    throw core::ConfigError("tsdf: need 0 <= min_depth_m < max_depth_m");
+  }
+  if (config.block_resolution < 2) {
+    throw core::ConfigError("tsdf: block_resolution must be at least 2");
+  }
+}
+
+namespace {
+
+// Depth in metres as a float image, with depth outside [min, max] set to 0 (invalid).
+o3d::geometry::Image depthMetres(const cv::Mat& depth_mm, double min_m, double max_m) {
+  o3d::geometry::Image image;
+  image.Prepare(depth_mm.cols, depth_mm.rows, 1, 4);
+  for (int v = 0; v < depth_mm.rows; ++v) {
+    const auto* src = depth_mm.ptr<std::uint16_t>(v);
+    auto* dst = image.PointerAt<float>(0, v);
+    for (int u = 0; u < depth_mm.cols; ++u) {
+      const double z = src[u] * 1e-3;
+      dst[u] = (z >= min_m && z <= max_m) ? static_cast<float>(z) : 0.0f;
+    }
+  }
+  return image;
+}
+
+o3d::geometry::Image colourImage(const cv::Mat& rgb, int width, int height) {
+  cv::Mat sized = rgb;
+  if (rgb.empty()) {
+    sized = cv::Mat(height, width, CV_8UC3, cv::Scalar(128, 128, 128));
+  } else if (rgb.cols != width || rgb.rows != height) {
+    cv::resize(rgb, sized, cv::Size(width, height), 0, 0, cv::INTER_AREA);
+  }
+  o3d::geometry::Image image;
+  image.Prepare(width, height, 3, 1);
+  for (int v = 0; v < height; ++v) {
+    std::memcpy(image.PointerAt<std::uint8_t>(0, v, 0), sized.ptr<std::uint8_t>(v),
+                static_cast<std::size_t>(width) * 3);
+  }
+  return image;
+}
+
+}  // namespace
+
+TsdfMap::TsdfMap(const TsdfConfig& config)
+    : config_(config),
+      volume_(std::make_unique<Volume>(config.voxel_size_m, config.truncation_m,
+                                       config.block_resolution)) {}
+
+TsdfMap::~TsdfMap() = default;
+
+void TsdfMap::integrate(const core::Frame& frame, const core::Isometry& T_W_C) {
+  const core::Intrinsics& k = frame.intrinsics;
+  if (!k.valid() || frame.depth_mm.type() != CV_16UC1 || frame.depth_mm.cols != k.width ||
+      frame.depth_mm.rows != k.height) {
+    throw core::Error(fmt::format("frame {}: depth {}x{} does not match intrinsics {}", frame.index,
+                                  frame.depth_mm.cols, frame.depth_mm.rows, k.describe()));
+  }
+  if (thread_cap_ > 0) omp_set_num_threads(thread_cap_);
+
+  o3d::geometry::RGBDImage rgbd;
+  rgbd.depth_ = depthMetres(frame.depth_mm, config_.min_depth_m, config_.max_depth_m);
+  rgbd.color_ = colourImage(frame.rgb, k.width, k.height);
+  const o3d::camera::PinholeCameraIntrinsic intrinsic(k.width, k.height, k.fx, k.fy, k.cx, k.cy);
+  // Open3D takes the extrinsic as world-to-camera.
+  const Eigen::Matrix4d T_C_W = T_W_C.inverse().matrix();
+  volume_->tsdf.Integrate(rgbd, intrinsic, T_C_W);
+}
+
+SurfaceMesh TsdfMap::extractMesh() const {
+  const auto mesh = volume_->tsdf.ExtractTriangleMesh();
+  SurfaceMesh out;
+  out.vertices = mesh->vertices_;
+  out.colors = mesh->vertex_colors_;
+  out.triangles = mesh->triangles_;
+  return out;
+}
+
+std::size_t TsdfMap::blockCount() const { return volume_->tsdf.volume_units_.size(); }
+
+std::size_t TsdfMap::memoryBytes() const {
+  const auto r = static_cast<std::size_t>(config_.block_resolution);
+  return blockCount() * r * r * r * sizeof(o3d::geometry::TSDFVoxel);
+}
+
+void writePly(const SurfaceMesh& mesh, const std::filesystem::path& path) {
+  o3d::geometry::TriangleMesh o3d_mesh;
+  o3d_mesh.vertices_ = mesh.vertices;
+  o3d_mesh.vertex_colors_ = mesh.colors;
+  o3d_mesh.triangles_ = mesh.triangles;
+  if (!o3d::io::WriteTriangleMesh(path.string(), o3d_mesh, /*write_ascii=*/false,
+                                  /*compressed=*/false, /*write_vertex_normals=*/false)) {
+    throw core::Error(
+        fmt::format("{}: could not write the mesh (disk full or no permission?)", path.string()));
+  }
+}
+
+}  // namespace tessera::fusion

@@ -1,0 +1,56 @@
+#include "tessera/pipeline/flow_graph.h"
+
+#include <thread>
+
+#include <oneapi/tbb/flow_graph.h>
+#include <oneapi/tbb/task_arena.h>
+
+namespace tessera::pipeline {
+
+namespace flow = oneapi::tbb::flow;
+
+int defaultThreadCount() {
+  const unsigned hardware = std::thread::hardware_concurrency();
+  return hardware == 0 ? 1 : static_cast<int>(hardware);
+}
+
+void runGraph(SourceStage& source, FusionStage& fusion, StatsSink& sink,
+              const GraphOptions& options) {
+  const int threads = options.threads > 0 ? options.threads : defaultThreadCount();
+  oneapi::tbb::task_arena arena(threads);
+  arena.execute([&] {
+    flow::graph graph;
+
+    flow::input_node<core::Frame> source_node(graph, [&](oneapi::tbb::flow_control& control) {
+      std::optional<core::Frame> frame = source.next();
+      if (!frame) {
+        control.stop();
+        return core::Frame{};
+      }
+      return std::move(*frame);
+    });
+    // Replay: never drop a frame; hold the source back instead.
+    flow::limiter_node<core::Frame> limiter(graph,
+                                            static_cast<std::size_t>(options.max_frames_in_flight));
+    flow::function_node<core::Frame, FusedFrame> fusion_node(
+        graph, flow::serial, [&](core::Frame frame) { return fusion.process(std::move(frame)); });
+    flow::function_node<FusedFrame, flow::continue_msg> sink_node(graph, flow::serial,
+                                                                  [&](const FusedFrame& fused) {
+                                                                    sink.process(fused);
+                                                                    return flow::continue_msg{};
+                                                                  });
+
+    flow::make_edge(source_node, limiter);
+    flow::make_edge(limiter, fusion_node);
+    flow::make_edge(fusion_node, sink_node);
+    flow::make_edge(sink_node, limiter.decrementer());
+
+    source_node.activate();
+    graph.wait_for_all();
+  });
+  // End of stream: flush in topological order.
+  fusion.flush();
+  sink.flush();
+}
+
+}  // namespace tessera::pipeline

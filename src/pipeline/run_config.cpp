@@ -1,0 +1,34 @@
+#include "tessera/pipeline/run_config.h"
+
+#include "tessera/core/error.h"
+
+namespace tessera::pipeline {
+
+void readConfig(const core::ConfigSection& section, PipelineConfig& config) {
+  section.read("max_frames_in_flight", config.max_frames_in_flight);
+  if (config.max_frames_in_flight < 1) {
+    throw core::ConfigError("pipeline: max_frames_in_flight must be at least 1");
+  }
+}
+
+RunConfig readRunConfig(const core::ConfigDocument& doc) {
+  RunConfig config;
+  const core::ConfigSection root = doc.root();
+  try {
+    readConfig(root.section("pipeline"), config.pipeline);
+    fusion::readConfig(root.section("tsdf"), config.tsdf);
+  } catch (const core::ConfigError& e) {
+    const std::string message = e.what();
+    // Range checks inside the stages do not know the file; add it.
+    if (message.rfind(doc.origin(), 0) == 0) throw;
+    throw core::ConfigError(doc.origin() + ": " + message);
+  }
+  doc.checkAllKeysUsed();
+  return config;
+}
+
+RunConfig loadRunConfig(const std::optional<std::filesystem::path>& path) {
+  return readRunConfig(path ? core::ConfigDocument::load(*path) : core::ConfigDocument::empty());
+}
+
+}  // namespace tessera::pipeline

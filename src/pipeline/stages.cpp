@@ -1,0 +1,115 @@
+#include "tessera/pipeline/stages.h"
+
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+#include <nlohmann/json.hpp>
+
+#include "tessera/core/error.h"
+
+namespace tessera::pipeline {
+
+SourceStage::SourceStage(core::FrameSource& source, std::optional<std::size_t> max_frames)
+    : source_(source), max_frames_(max_frames) {}
+
+std::optional<core::Frame> SourceStage::next() {
+  while (!max_frames_ || frames_read_ < *max_frames_) {
+    core::ReadResult result;
+    {
+      ScopedStageTime time(timer_);
+      result = source_.read();
+    }
+    switch (result.status) {
+      case core::ReadStatus::kFrame:
+        ++frames_read_;
+        return std::move(result.frame);
+      case core::ReadStatus::kBadFrame:
+        ++bad_frames_;
+        spdlog::warn("{}: skipped {}", source_.name(), result.problem);
+        break;
+      case core::ReadStatus::kEndOfData:
+        if (!result.problem.empty()) {
+          end_problem_ = result.problem;
+          spdlog::error("{}: {}", source_.name(), result.problem);
+        }
+        return std::nullopt;
+    }
+  }
+  return std::nullopt;
+}
+
+FusionStage::FusionStage(const fusion::TsdfConfig& config, int thread_cap) : map_(config) {
+  map_.setThreadCap(thread_cap);
+}
+
+FusedFrame FusionStage::process(core::Frame frame) {
+  FusedFrame fused;
+  {
+    ScopedStageTime time(timer_);
+    if (!frame.T_W_C_gt) {
+      fused.skip_reason = "no pose (camera tracking is not implemented yet; ground truth only)";
+    } else {
+      try {
+        map_.integrate(frame, *frame.T_W_C_gt);
+        fused.integrated = true;
+      } catch (const core::Error& e) {
+        fused.skip_reason = e.what();
+        spdlog::warn("fusion skipped {}", e.what());
+      }
+    }
+  }
+  fused.fusion_ms = timer_.lastMs();
+  (fused.integrated ? integrated_ : skipped_)++;
+  fused.tsdf_bytes = map_.memoryBytes();
+  fused.frame = std::move(frame);
+  return fused;
+}
+
+StatsSink::StatsSink(const std::filesystem::path& stats_path,
+                     std::optional<std::size_t> frames_total, ProgressCallback on_progress)
+    : stats_path_(stats_path),
+      stats_(stats_path),
+      frames_total_(frames_total),
+      on_progress_(std::move(on_progress)),
+      start_(std::chrono::steady_clock::now()) {
+  if (!stats_)
+    throw core::Error(fmt::format("{}: cannot create the stats file", stats_path.string()));
+}
+
+void StatsSink::process(const FusedFrame& fused) {
+  ScopedStageTime time(timer_);
+  ++frames_done_;
+  map_bytes_ = fused.tsdf_bytes;  // textures join the map size in later stages
+  const double elapsed_s =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+
+  if (!write_failed_) {
+    nlohmann::json line = {{"type", "frame"},
+                           {"index", fused.frame.index},
+                           {"timestamp_ns", fused.frame.timestamp_ns},
+                           {"elapsed_s", elapsed_s},
+                           {"integrated", fused.integrated},
+                           {"fusion_ms", fused.fusion_ms},
+                           {"tsdf_bytes", fused.tsdf_bytes},
+                           {"map_bytes", map_bytes_},
+                           {"patches_finalized", 0},
+                           {"textures_stored", 0}};
+    if (!fused.integrated) line["skip_reason"] = fused.skip_reason;
+    stats_ << line.dump() << '\n';
+    if (!stats_) {
+      write_failed_ = true;
+      spdlog::error("{}: writing failed (disk full?); no further stats lines",
+                    stats_path_.string());
+    }
+  }
+  if (on_progress_) on_progress_({frames_done_, frames_total_, elapsed_s, map_bytes_});
+}
+
+void StatsSink::flush() {
+  stats_.close();
+  if (write_failed_ || stats_.fail()) {
+    throw core::Error(
+        fmt::format("{}: could not be written completely (disk full?)", stats_path_.string()));
+  }
+}
+
+}  // namespace tessera::pipeline

@@ -1,0 +1,80 @@
+#include <gtest/gtest.h>
+
+#include "support/synthetic_plane.h"
+#include "tessera/core/error.h"
+#include "tessera/fusion/tsdf_map.h"
+
+namespace tessera::fusion {
+namespace {
+
+// A camera at `position` looking along world +z, turned by `yaw_rad` about the world y axis.
+core::Isometry cameraAt(const Eigen::Vector3d& position, double yaw_rad) {
+  core::Isometry T_W_C = core::Isometry::Identity();
+  T_W_C.linear() = Eigen::AngleAxisd(yaw_rad, Eigen::Vector3d::UnitY()).toRotationMatrix();
+  T_W_C.translation() = position;
+  return T_W_C;
+}
+
+TEST(TsdfMap, SurfaceOfASyntheticPlaneLiesWithinOneVoxelOfTheTruth) {
+  TsdfConfig config;  // 1 cm voxels
+  TsdfMap map(config);
+  EXPECT_EQ(map.memoryBytes(), 0u);
+
+  // A tilted plane about 1.5 m ahead; its offset is deliberately off the voxel lattice.
+  const Eigen::Vector3d n = Eigen::Vector3d(0.15, -0.25, -1.0).normalized();
+  const double d = n.dot(Eigen::Vector3d(0.0, 0.0, 1.5137));
+  const core::Intrinsics k = test::kinectIntrinsics();
+  for (int i = 0; i < 6; ++i) {
+    const core::Isometry T_W_C = cameraAt({0.05 * i, -0.02 * i, 0.01 * i}, 0.03 * i);
+    core::Frame frame = test::renderPlane(k, T_W_C, n, d);
+    frame.index = static_cast<std::uint64_t>(i);
+    map.integrate(frame, T_W_C);
+  }
+  EXPECT_GT(map.memoryBytes(), 0u);
+
+  const SurfaceMesh mesh = map.extractMesh();
+  ASSERT_GT(mesh.vertices.size(), 10000u);
+  ASSERT_EQ(mesh.colors.size(), mesh.vertices.size());
+  double worst = 0.0;
+  Eigen::Vector3d lo = mesh.vertices.front(), hi = mesh.vertices.front();
+  for (const Eigen::Vector3d& X : mesh.vertices) {
+    worst = std::max(worst, std::abs(n.dot(X) - d));
+    lo = lo.cwiseMin(X);
+    hi = hi.cwiseMax(X);
+  }
+  EXPECT_LE(worst, config.voxel_size_m) << "surface vertex farther than one voxel from the plane";
+  // The plane fills the view: at 1.5 m a 640x480 Kinect sees about 1.8 m x 1.4 m.
+  EXPECT_GT(hi.x() - lo.x(), 1.5);
+  EXPECT_GT(hi.y() - lo.y(), 1.1);
+}
+
+TEST(TsdfMap, DepthOutsideTheConfiguredRangeIsIgnored) {
+  TsdfConfig config;
+  config.max_depth_m = 1.0;  // the plane at 1.5 m is beyond it
+  TsdfMap map(config);
+  const core::Intrinsics k = test::kinectIntrinsics();
+  const Eigen::Vector3d n(0, 0, -1);
+  const core::Isometry T_W_C = core::Isometry::Identity();
+  map.integrate(test::renderPlane(k, T_W_C, n, n.dot(Eigen::Vector3d(0, 0, 1.5137))), T_W_C);
+  EXPECT_TRUE(map.extractMesh().vertices.empty());
+}
+
+TEST(TsdfMap, FrameWhoseSizeDisagreesWithItsIntrinsicsIsRejected) {
+  TsdfMap map(TsdfConfig{});
+  core::Frame frame = test::renderPlane(test::kinectIntrinsics(), core::Isometry::Identity(),
+                                        Eigen::Vector3d(0, 0, -1), -1.5);
+  frame.intrinsics.width = 320;
+  EXPECT_THROW(map.integrate(frame, core::Isometry::Identity()), core::Error);
+}
+
+TEST(TsdfMap, AllInvalidDepthAddsNothing) {
+  TsdfMap map(TsdfConfig{});
+  core::Frame frame = test::renderPlane(test::kinectIntrinsics(), core::Isometry::Identity(),
+                                        Eigen::Vector3d(0, 0, -1), -1.5);
+  frame.depth_mm.setTo(0);
+  map.integrate(frame, core::Isometry::Identity());
+  EXPECT_TRUE(map.extractMesh().vertices.empty());
+}
+
+}  // namespace
+}  // namespace tessera::fusion
