@@ -10,6 +10,7 @@ int main(int argc, char** argv) {
   CLI::App app{"tessera: compact textured maps from RGB-D sensors"};
   app.set_version_flag("--version", TESSERA_VERSION);
   app.require_subcommand(1);
+  app.fallthrough();  // global options may follow the subcommand
   std::string log_level = "info";
   app.add_option("--log-level", log_level, "trace, debug, info, warn, error or off")
       ->capture_default_str();

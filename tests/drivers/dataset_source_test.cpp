@@ -161,6 +161,13 @@ TEST(DatasetSource, TumFolderWithoutCameraNameNeedsIntrinsics) {
     EXPECT_NE(std::string(e.what()).find("--intrinsics"), std::string::npos) << e.what();
     EXPECT_NE(std::string(e.what()).find("desk_sequence"), std::string::npos) << e.what();
   }
+  // "fr2" as a word of the name selects the freiburg2 calibration; "frame2" does not.
+  fs::rename(renamed, base / "tum_fr2_desk");
+  EXPECT_DOUBLE_EQ(DatasetSource(base / "tum_fr2_desk").intrinsics().fx, 520.9);
+  fs::rename(base / "tum_fr2_desk", base / "frame2");
+  EXPECT_THROW(DatasetSource(base / "frame2"), core::ConfigError);
+  fs::rename(base / "frame2", renamed);
+
   DatasetOptions options;
   options.intrinsics = core::parseIntrinsicsSpec("525,525,319.5,239.5");
   DatasetSource source(renamed, options);

@@ -1,9 +1,9 @@
 // TUM RGB-D benchmark folders: rgb.txt, depth.txt, optional associations.txt and
 // groundtruth.txt ("timestamp tx ty tz qx qy qz qw", camera pose in the world).
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <map>
-#include <regex>
 #include <sstream>
 
 #include <fmt/format.h>
@@ -115,14 +115,32 @@ class Trajectory {
   std::map<std::int64_t, core::Isometry> poses_;
 };
 
+// Which TUM Kinect (1, 2 or 3) a folder name names: "freiburg1", "fr1", "fr_2", ... as a word
+// of its own (preceded by a non-alphanumeric character or the start); 0 when none.
+int tumCameraFromName(const std::string& folder_name) {
+  std::string name = folder_name;
+  for (char& c : name) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  for (const std::string prefix : {"freiburg", "fr"}) {
+    for (std::size_t at = name.find(prefix); at != std::string::npos;
+         at = name.find(prefix, at + 1)) {
+      if (at > 0 && std::isalnum(static_cast<unsigned char>(name[at - 1]))) continue;
+      std::size_t digit = at + prefix.size();
+      if (digit < name.size() && name[digit] == '_') ++digit;
+      if (digit >= name.size() || name[digit] < '1' || name[digit] > '3') continue;
+      if (digit + 1 < name.size() && std::isdigit(static_cast<unsigned char>(name[digit + 1]))) {
+        continue;
+      }
+      return name[digit] - '0';
+    }
+  }
+  return 0;
+}
+
 // The published calibrations of the three TUM Kinects (vision.in.tum.de, "File Formats").
 std::optional<core::Intrinsics> publishedTumIntrinsics(const std::string& folder_name,
                                                        std::string& origin) {
-  static const std::regex kCamera("(^|[^a-z0-9])(freiburg|fr)_?([123])([^0-9]|$)",
-                                  std::regex::icase);
-  std::smatch match;
-  if (!std::regex_search(folder_name, match, kCamera)) return std::nullopt;
-  const int camera = match[3].str()[0] - '0';
+  const int camera = tumCameraFromName(folder_name);
+  if (camera == 0) return std::nullopt;
   core::Intrinsics k;
   k.width = 640;
   k.height = 480;
