@@ -22,15 +22,39 @@ std::string joinPath(const std::string& parent, std::string_view key) {
   return parent.empty() ? std::string(key) : parent + "." + std::string(key);
 }
 
-// Walks the dotted path from `node`; returns an undefined node when any part is missing.
-// (Recursive on purpose: assigning yaml-cpp nodes would rewrite the tree, not rebind.)
+// Walks the dotted path ("planes[2].texture") from `node`; returns an undefined node when any
+// part is missing. (Recursive on purpose: assigning yaml-cpp nodes would rewrite the tree.)
 YAML::Node lookup(const YAML::Node& node, std::string_view path) {
   if (path.empty()) return node;
-  if (!node.IsMap()) return YAML::Node(YAML::NodeType::Undefined);
   const std::size_t dot = path.find('.');
-  const YAML::Node child = node[std::string(path.substr(0, dot))];
+  std::string_view part = path.substr(0, dot);
+  const std::size_t bracket = part.find('[');
+  if (!node.IsMap()) return YAML::Node(YAML::NodeType::Undefined);
+  YAML::Node child = node[std::string(part.substr(0, bracket))];
   if (!child) return YAML::Node(YAML::NodeType::Undefined);
+  if (bracket != std::string_view::npos) {
+    const std::size_t index = std::stoul(std::string(part.substr(bracket + 1)));
+    if (!child.IsSequence() || index >= child.size()) return YAML::Node(YAML::NodeType::Undefined);
+    const YAML::Node item = child[index];
+    child.reset(item);
+  }
   return dot == std::string_view::npos ? child : lookup(child, path.substr(dot + 1));
+}
+
+std::vector<double> numbersOf(const YAML::Node& node, const std::string& origin,
+                              const std::string& path) {
+  std::vector<double> values;
+  if (!node.IsSequence()) {
+    throw ConfigError(fmt::format("{}: key '{}' must be a list of numbers", origin, path));
+  }
+  for (const auto& item : node) {
+    try {
+      values.push_back(item.as<double>());
+    } catch (const YAML::Exception&) {
+      throw ConfigError(fmt::format("{}: key '{}' must be a list of numbers", origin, path));
+    }
+  }
+  return values;
 }
 
 template <typename T>
@@ -53,17 +77,19 @@ void readScalar(ConfigSection::State& state, const std::string& path, T& value,
   }
 }
 
+// A map's keys nobody read; maps and lists of maps that were opened are searched inside.
 void collectUnused(const YAML::Node& node, const std::string& path,
                    const std::set<std::string>& used, std::vector<std::string>& unused) {
-  if (node.IsMap()) {
-    for (const auto& entry : node) {
-      const std::string child = joinPath(path, entry.first.as<std::string>());
-      if (entry.second.IsMap() && !used.contains(child)) {
-        unused.push_back(child);
-      } else if (entry.second.IsMap()) {
-        collectUnused(entry.second, child, used, unused);
-      } else if (!used.contains(child)) {
-        unused.push_back(child);
+  if (!node.IsMap()) return;
+  for (const auto& entry : node) {
+    const std::string child = joinPath(path, entry.first.as<std::string>());
+    if (!used.contains(child)) {
+      unused.push_back(child);
+    } else if (entry.second.IsMap()) {
+      collectUnused(entry.second, child, used, unused);
+    } else if (entry.second.IsSequence() && used.contains(child + "[]")) {
+      for (std::size_t i = 0; i < entry.second.size(); ++i) {
+        collectUnused(entry.second[i], fmt::format("{}[{}]", child, i), used, unused);
       }
     }
   }
@@ -85,6 +111,62 @@ void ConfigSection::read(std::string_view key, bool& value) const {
 }
 void ConfigSection::read(std::string_view key, std::string& value) const {
   readScalar(*document_, joinPath(path_, key), value, "a string");
+}
+
+void ConfigSection::read(std::string_view key, std::vector<double>& value) const {
+  const std::string path = joinPath(path_, key);
+  const YAML::Node node = lookup(document_->root, path);
+  if (!node.IsDefined() || node.IsNull()) {
+    document_->absent.insert(path);
+    return;
+  }
+  document_->used.insert(path);
+  value = numbersOf(node, document_->origin, path);
+}
+
+void ConfigSection::read(std::string_view key, std::vector<std::vector<double>>& value) const {
+  const std::string path = joinPath(path_, key);
+  const YAML::Node node = lookup(document_->root, path);
+  if (!node.IsDefined() || node.IsNull()) {
+    document_->absent.insert(path);
+    return;
+  }
+  document_->used.insert(path);
+  if (!node.IsSequence()) {
+    throw ConfigError(
+        fmt::format("{}: key '{}' must be a list of lists of numbers", document_->origin, path));
+  }
+  value.clear();
+  for (const auto& row : node) value.push_back(numbersOf(row, document_->origin, path));
+}
+
+bool ConfigSection::has(std::string_view key) const {
+  const YAML::Node node = lookup(document_->root, joinPath(path_, key));
+  return node.IsDefined() && !node.IsNull();
+}
+
+const std::string& ConfigSection::origin() const { return document_->origin; }
+
+std::vector<ConfigSection> ConfigSection::list(std::string_view key) const {
+  const std::string path = joinPath(path_, key);
+  const YAML::Node node = lookup(document_->root, path);
+  std::vector<ConfigSection> items;
+  if (!node.IsDefined() || node.IsNull()) return items;
+  if (!node.IsSequence()) {
+    throw ConfigError(fmt::format("{}: key '{}' must be a list", document_->origin, path));
+  }
+  document_->used.insert(path);
+  document_->used.insert(path + "[]");  // its items are checked for unknown keys too
+  for (std::size_t i = 0; i < node.size(); ++i) {
+    if (!node[i].IsMap()) {
+      throw ConfigError(
+          fmt::format("{}: item {} of '{}' must be a map of settings", document_->origin, i, path));
+    }
+    const std::string item_path = fmt::format("{}[{}]", path, i);
+    document_->used.insert(item_path);
+    items.push_back(ConfigSection(document_, item_path));
+  }
+  return items;
 }
 
 ConfigSection ConfigSection::section(std::string_view key) const {

@@ -100,5 +100,34 @@ TEST(Config, ReportsKeysAskedForButAbsent) {
   EXPECT_EQ(absent, (std::vector<std::string>{"example.count", "example.enabled", "example.name"}));
 }
 
+TEST(Config, ReadsListsOfMapsAndNumbersAndChecksTheirKeys) {
+  const auto doc = ConfigDocument::fromString(
+      "planes:\n"
+      "  - id: floor\n    polygon: [[0, 0], [4, 0], [4, 5]]\n    normal: [0, 0, 1]\n"
+      "  - id: wall\n    polygon: [[0, 0], [1, 0], [1, 1]]\n    colour: red\n",
+      "scene.yaml");
+  const auto planes = doc.root().list("planes");
+  ASSERT_EQ(planes.size(), 2u);
+  std::string id;
+  std::vector<std::vector<double>> polygon;
+  std::vector<double> normal;
+  planes[0].read("id", id);
+  planes[0].read("polygon", polygon);
+  planes[0].read("normal", normal);
+  EXPECT_EQ(id, "floor");
+  ASSERT_EQ(polygon.size(), 3u);
+  EXPECT_DOUBLE_EQ(polygon[2][1], 5.0);
+  EXPECT_EQ(normal, (std::vector<double>{0, 0, 1}));
+  planes[1].read("id", id);
+  planes[1].read("polygon", polygon);
+  const std::string message = configErrorOf([&] { doc.checkAllKeysUsed(); });
+  EXPECT_NE(message.find("planes[1].colour"), std::string::npos) << message;
+
+  std::vector<double> bad;
+  const auto typed = ConfigDocument::fromString("v: [1, x]\n", "t.yaml");
+  EXPECT_NE(configErrorOf([&] { typed.root().read("v", bad); }).find("list of numbers"),
+            std::string::npos);
+}
+
 }  // namespace
 }  // namespace tessera::core

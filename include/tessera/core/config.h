@@ -24,9 +24,21 @@ class ConfigSection {
   void read(std::string_view key, int& value) const;
   void read(std::string_view key, bool& value) const;
   void read(std::string_view key, std::string& value) const;
+  // A list of numbers, e.g. `position: [1.0, 2.0, 0.5]`.
+  void read(std::string_view key, std::vector<double>& value) const;
+  // A list of lists of numbers, e.g. a polygon `[[0, 0], [4, 0], [4, 2.6]]`.
+  void read(std::string_view key, std::vector<std::vector<double>>& value) const;
+
+  bool has(std::string_view key) const;
 
   // The sub-map under `key` (empty when absent).
   ConfigSection section(std::string_view key) const;
+  // The maps of a list under `key` (empty when absent), addressed as key[i] in messages.
+  std::vector<ConfigSection> list(std::string_view key) const;
+  // Dotted path of this section, for messages ("" at the root).
+  const std::string& path() const { return path_; }
+  // The origin (file name) of the document, for messages.
+  const std::string& origin() const;
 
   struct State;  // the parsed document and the keys read so far (defined in config.cpp)
 
