@@ -2,6 +2,7 @@
 #include <spdlog/spdlog.h>
 #include <CLI/CLI.hpp>
 
+#include "record_command.h"
 #include "run_command.h"
 #include "tessera/core/error.h"
 #include "tessera/core/log.h"
@@ -17,6 +18,8 @@ int main(int argc, char** argv) {
 
   tessera::cli::RunArguments run_args;
   CLI::App* run = tessera::cli::addRunCommand(app, run_args);
+  tessera::cli::RecordArguments record_args;
+  CLI::App* record = tessera::cli::addRecordCommand(app, record_args);
 
   CLI11_PARSE(app, argc, argv);
   try {
@@ -26,5 +29,6 @@ int main(int argc, char** argv) {
     return 2;
   }
   if (run->parsed()) return tessera::cli::runCommand(run_args);
+  if (record->parsed()) return tessera::cli::recordCommand(record_args);
   return 0;
 }

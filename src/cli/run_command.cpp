@@ -16,8 +16,8 @@ CLI::App* addRunCommand(CLI::App& app, RunArguments& args) {
   CLI::App* run = app.add_subcommand(
       "run", "Build a map from SOURCE and write it, with report.json and stats.jsonl, to --out");
   run->add_option("SOURCE", args.source,
-                  "Recorded dataset folder (TUM RGB-D, 7-Scenes, Redwood, slambook). "
-                  "Default: the committed recording recordings/tum_fr1_rpy_20");
+                  "OpenNI2 recording (.oni) or recorded dataset folder (TUM RGB-D, 7-Scenes, "
+                  "Redwood, slambook). Default: the committed recording recordings/tum_fr1_rpy_20.oni");
   run->add_option("--config", args.config, "YAML config (keys as in config/default.yaml)")
       ->check(CLI::ExistingFile);
   run->add_option("--out", args.out_dir, "Output folder (created if needed)")
@@ -26,15 +26,7 @@ CLI::App* addRunCommand(CLI::App& app, RunArguments& args) {
                   "Worker threads for the flow graph, Open3D and OpenCV (0: all cores)")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
-  run->add_option("--intrinsics", args.intrinsics,
-                  "Camera intrinsics 'fx,fy,cx,cy[,width,height]' or a YAML file with those "
-                  "keys; overrides what the source carries");
-  run->add_option("--depth-scale", args.depth_units_per_m,
-                  "Raw depth units per metre (TUM 5000, millimetre formats 1000); "
-                  "default: the layout's own")
-      ->check(CLI::PositiveNumber);
-  run->add_option("--max-frames", args.max_frames, "Stop after this many frames (0: all)")
-      ->capture_default_str();
+  addSourceOptions(*run, args.source_args);
   return run;
 }
 
@@ -42,13 +34,10 @@ int runCommand(const RunArguments& args) {
   try {
     const pipeline::RunConfig config = pipeline::loadRunConfig(
         args.config.empty() ? std::nullopt : std::optional<std::filesystem::path>(args.config));
-    drivers::DatasetOptions options;
-    if (!args.intrinsics.empty()) options.intrinsics = core::parseIntrinsicsSpec(args.intrinsics);
-    if (args.depth_units_per_m > 0.0) options.depth_units_per_m = args.depth_units_per_m;
 
     const std::string source_spec = args.source.empty() ? defaultRecording().string() : args.source;
     if (args.source.empty()) spdlog::info("no SOURCE given: replaying {}", source_spec);
-    auto source = openSource(source_spec, options);
+    auto source = openSource(source_spec, args.source_args);
 
     const int threads = args.threads > 0 ? args.threads : pipeline::defaultThreadCount();
     cv::setNumThreads(threads);
@@ -56,7 +45,7 @@ int runCommand(const RunArguments& args) {
     pipeline::RunOptions run_options;
     run_options.out_dir = args.out_dir;
     run_options.threads = threads;
-    if (args.max_frames > 0) run_options.max_frames = args.max_frames;
+    if (args.source_args.max_frames > 0) run_options.max_frames = args.source_args.max_frames;
     run_options.on_progress = [&progress](const pipeline::Progress& p) { progress.update(p); };
 
     const pipeline::RunSummary summary = pipeline::runPipeline(*source, config, run_options);

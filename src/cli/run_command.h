@@ -5,6 +5,8 @@
 
 #include <CLI/CLI.hpp>
 
+#include "source_factory.h"
+
 namespace tessera::cli {
 
 struct RunArguments {
@@ -12,9 +14,7 @@ struct RunArguments {
   std::string config;
   std::string out_dir = "tessera_out";
   int threads = 0;
-  std::string intrinsics;
-  double depth_units_per_m = 0.0;  // 0: the layout's own
-  std::size_t max_frames = 0;      // 0: all
+  SourceArguments source_args;
 };
 
 // Adds the subcommand and its options to `app`; the returned arguments fill on parse.

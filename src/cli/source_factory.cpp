@@ -6,23 +6,48 @@
 #include <fmt/format.h>
 
 #include "tessera/core/error.h"
+#include "tessera/drivers/dataset_source.h"
+#include "tessera/drivers/oni/oni_source.h"
 
 namespace tessera::cli {
 
 namespace fs = std::filesystem;
 
 namespace {
-constexpr const char* kDefaultRecording = "tum_fr1_rpy_20";
+constexpr const char* kDefaultRecording = "tum_fr1_rpy_20.oni";
 }
 
-std::unique_ptr<core::FrameSource> openSource(const std::string& spec,
-                                              const drivers::DatasetOptions& options) {
+void addSourceOptions(CLI::App& command, SourceArguments& args) {
+  command.add_option("--intrinsics", args.intrinsics,
+                     "Camera intrinsics 'fx,fy,cx,cy[,width,height]' or a YAML file with those "
+                     "keys; overrides what the source carries");
+  command.add_option("--depth-scale", args.depth_units_per_m,
+                     "Raw depth units per metre of a dataset folder (TUM 5000, millimetre "
+                     "formats 1000); default: the layout's own")
+      ->check(CLI::PositiveNumber);
+  command.add_option("--max-frames", args.max_frames, "Stop after this many frames (0: all)")
+      ->capture_default_str();
+}
+
+std::unique_ptr<core::FrameSource> openSource(const std::string& spec, const SourceArguments& args) {
+  std::optional<core::Intrinsics> intrinsics;
+  if (!args.intrinsics.empty()) intrinsics = core::parseIntrinsicsSpec(args.intrinsics);
   std::error_code ec;
-  if (fs::is_directory(spec, ec)) return std::make_unique<drivers::DatasetSource>(spec, options);
+  if (fs::is_directory(spec, ec)) {
+    drivers::DatasetOptions options;
+    options.intrinsics = intrinsics;
+    if (args.depth_units_per_m > 0.0) options.depth_units_per_m = args.depth_units_per_m;
+    return std::make_unique<drivers::DatasetSource>(spec, options);
+  }
+  if (fs::path(spec).extension() == ".oni") {
+    drivers::oni::OniSourceOptions options;
+    options.intrinsics = intrinsics;
+    return std::make_unique<drivers::oni::OniSource>(spec, options);
+  }
   if (fs::exists(spec, ec)) {
     throw core::SourceError(fmt::format(
-        "{}: not a source tessera can read yet; SOURCE must be a recorded dataset folder "
-        "(TUM RGB-D, 7-Scenes, Redwood or slambook layout)",
+        "{}: not a source tessera can read; SOURCE must be an OpenNI2 recording (.oni) or a "
+        "recorded dataset folder (TUM RGB-D, 7-Scenes, Redwood or slambook layout)",
         spec));
   }
   throw core::SourceError(fmt::format("{}: no such file or folder", spec));
@@ -35,7 +60,7 @@ fs::path defaultRecording() {
   candidates.emplace_back(fs::path(TESSERA_SOURCE_DIR) / "recordings");
   for (const fs::path& dir : candidates) {
     std::error_code ec;
-    if (fs::is_directory(dir / kDefaultRecording, ec)) return dir / kDefaultRecording;
+    if (fs::is_regular_file(dir / kDefaultRecording, ec)) return dir / kDefaultRecording;
   }
   throw core::SourceError(fmt::format(
       "no SOURCE given and the default recording '{}' was not found in $TESSERA_RECORDINGS, "

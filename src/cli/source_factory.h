@@ -5,14 +5,24 @@
 #include <optional>
 #include <string>
 
+#include <CLI/CLI.hpp>
+
 #include "tessera/core/frame_source.h"
-#include "tessera/drivers/dataset_source.h"
 
 namespace tessera::cli {
 
-// Opens a dataset folder. Throws core::SourceError naming SOURCE and what tessera can read.
-std::unique_ptr<core::FrameSource> openSource(const std::string& spec,
-                                              const drivers::DatasetOptions& options);
+// The source options every subcommand that reads frames shares.
+struct SourceArguments {
+  std::string intrinsics;          // --intrinsics
+  double depth_units_per_m = 0.0;  // --depth-scale, 0: the source's own
+  std::size_t max_frames = 0;      // --max-frames, 0: all
+};
+
+void addSourceOptions(CLI::App& command, SourceArguments& args);
+
+// Opens a dataset folder or an .oni recording. Throws core::SourceError naming SOURCE and
+// listing what tessera can read, or core::ConfigError for bad --intrinsics.
+std::unique_ptr<core::FrameSource> openSource(const std::string& spec, const SourceArguments& args);
 
 // The recording `tessera run` replays when no SOURCE is given: $TESSERA_RECORDINGS, then
 // ./recordings, then the source tree's recordings/. Throws core::SourceError when none exists.

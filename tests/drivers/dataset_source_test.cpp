@@ -271,13 +271,5 @@ TEST(DatasetSource, UnknownFolderListsTheKnownLayouts) {
   EXPECT_THROW(DatasetSource(dir / "missing"), core::SourceError);
 }
 
-TEST(DatasetSource, ReadsTheCommittedDefaultRecording) {
-  DatasetSource source(test::sourceDir() / "recordings/tum_fr1_rpy_20");
-  EXPECT_EQ(source.layout(), DatasetLayout::kTum);
-  EXPECT_EQ(source.frameCount(), 20u);
-  EXPECT_EQ(source.framesWithPose(), 20u);
-  EXPECT_EQ(readAll(source).size(), 20u);
-}
-
 }  // namespace
 }  // namespace tessera::drivers

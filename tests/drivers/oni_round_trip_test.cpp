@@ -172,5 +172,20 @@ TEST(OniRoundTrip, CorruptHeaderIsAClearError) {
   EXPECT_THROW(OniSource(path.parent_path() / "missing.oni"), core::SourceError);
 }
 
+TEST(OniSource, PlaysTheCommittedDefaultRecordingWithItsGroundTruth) {
+  OniSource source(test::sourceDir() / "recordings/tum_fr1_rpy_20.oni");
+  EXPECT_EQ(source.frameCount(), 20u);
+  EXPECT_DOUBLE_EQ(source.intrinsics().fx, 517.3);  // from the sidecar, not the FOV
+  EXPECT_DOUBLE_EQ(source.intrinsics().cy, 255.3);
+  const auto frames = readAll(source);
+  ASSERT_EQ(frames.size(), 20u);
+  EXPECT_EQ(frames[0].timestamp_ns, 1305031234901998000);
+  for (const auto& frame : frames) {
+    ASSERT_TRUE(frame.T_W_C_gt.has_value());
+    EXPECT_EQ(frame.rgb.size(), cv::Size(640, 480));
+  }
+  EXPECT_NEAR(frames[0].T_W_C_gt->translation().x(), 1.27657, 1e-4);
+}
+
 }  // namespace
 }  // namespace tessera::drivers::oni

@@ -1,0 +1,26 @@
+#pragma once
+// `tessera record SOURCE OUT.oni`: converts any source into an OpenNI2 recording plus its
+// ground-truth sidecar OUT.gt.json.
+#include <string>
+
+#include <CLI/CLI.hpp>
+
+#include "source_factory.h"
+
+namespace tessera::cli {
+
+struct RecordArguments {
+  std::string source;
+  std::string output;
+  std::string depth_codec = "16zT";
+  std::string colour_codec = "jpeg";
+  int jpeg_quality = 90;
+  SourceArguments source_args;
+};
+
+CLI::App* addRecordCommand(CLI::App& app, RecordArguments& args);
+
+// Returns the process exit code. Errors are logged, never thrown.
+int recordCommand(const RecordArguments& args);
+
+}  // namespace tessera::cli
