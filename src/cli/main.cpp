@@ -20,6 +20,8 @@ int main(int argc, char** argv) {
   CLI::App* run = tessera::cli::addRunCommand(app, run_args);
   tessera::cli::RecordArguments record_args;
   CLI::App* record = tessera::cli::addRecordCommand(app, record_args);
+  tessera::cli::RecordArguments synth_args;
+  CLI::App* synth = tessera::cli::addSynthCommand(app, synth_args);
 
   CLI11_PARSE(app, argc, argv);
   try {
@@ -30,5 +32,6 @@ int main(int argc, char** argv) {
   }
   if (run->parsed()) return tessera::cli::runCommand(run_args);
   if (record->parsed()) return tessera::cli::recordCommand(record_args);
+  if (synth->parsed()) return tessera::cli::synthCommand(synth_args);
   return 0;
 }

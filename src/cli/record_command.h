@@ -23,4 +23,9 @@ CLI::App* addRecordCommand(CLI::App& app, RecordArguments& args);
 // Returns the process exit code. Errors are logged, never thrown.
 int recordCommand(const RecordArguments& args);
 
+// `tessera synth SCENE.yaml OUT.oni`: renders a synthetic scene into a recording whose
+// sidecar also holds the scene's planes, textures and sensor.
+CLI::App* addSynthCommand(CLI::App& app, RecordArguments& args);
+int synthCommand(const RecordArguments& args);
+
 }  // namespace tessera::cli

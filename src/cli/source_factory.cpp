@@ -8,6 +8,7 @@
 #include "tessera/core/error.h"
 #include "tessera/drivers/dataset_source.h"
 #include "tessera/drivers/oni/oni_source.h"
+#include "tessera/drivers/synthetic/renderer.h"
 
 namespace tessera::cli {
 
@@ -44,10 +45,14 @@ std::unique_ptr<core::FrameSource> openSource(const std::string& spec, const Sou
     options.intrinsics = intrinsics;
     return std::make_unique<drivers::oni::OniSource>(spec, options);
   }
+  if (const auto ext = fs::path(spec).extension(); (ext == ".yaml" || ext == ".yml") &&
+                                                   fs::is_regular_file(spec, ec)) {
+    return std::make_unique<drivers::synthetic::SyntheticSource>(spec);
+  }
   if (fs::exists(spec, ec)) {
     throw core::SourceError(fmt::format(
-        "{}: not a source tessera can read; SOURCE must be an OpenNI2 recording (.oni) or a "
-        "recorded dataset folder (TUM RGB-D, 7-Scenes, Redwood or slambook layout)",
+        "{}: not a source tessera can read; SOURCE must be an OpenNI2 recording (.oni), a "
+        "synthetic scene (.yaml) or a recorded dataset folder (TUM RGB-D, 7-Scenes, Redwood or slambook layout)",
         spec));
   }
   throw core::SourceError(fmt::format("{}: no such file or folder", spec));
