@@ -190,8 +190,8 @@ core::Isometry Scene::cameraPose(int frame) const {
 }
 
 std::int64_t Scene::timestampNs(int frame) const {
-  // Start at 1 s: OpenNI2 ignores a frame stamped 0.
-  return 1'000'000'000LL + static_cast<std::int64_t>(std::llround(frame * 1e9 / fps));
+  // Start at 1 s (OpenNI2 ignores a frame stamped 0), in whole microseconds (ONI's unit).
+  return 1'000'000'000LL + 1000LL * static_cast<std::int64_t>(std::llround(frame * 1e6 / fps));
 }
 
 Scene loadScene(const std::filesystem::path& path) {
