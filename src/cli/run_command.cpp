@@ -17,7 +17,7 @@ CLI::App* addRunCommand(CLI::App& app, RunArguments& args) {
       "run", "Build a map from SOURCE and write it, with report.json and stats.jsonl, to --out");
   run->add_option("SOURCE", args.source,
                   "OpenNI2 recording (.oni) or recorded dataset folder (TUM RGB-D, 7-Scenes, "
-                  "Redwood, slambook). Default: the committed recording recordings/tum_fr1_rpy_20.oni");
+                  "Redwood, slambook). Default: recordings/office.oni (rendered by the build)");
   run->add_option("--config", args.config, "YAML config (keys as in config/default.yaml)")
       ->check(CLI::ExistingFile);
   run->add_option("--out", args.out_dir, "Output folder (created if needed)")

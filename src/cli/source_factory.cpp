@@ -15,22 +15,25 @@ namespace tessera::cli {
 namespace fs = std::filesystem;
 
 namespace {
-constexpr const char* kDefaultRecording = "tum_fr1_rpy_20.oni";
-}
+// The synthetic office (rendered by the build), else the committed real TUM frames.
+constexpr const char* kDefaultRecordings[] = {"office.oni", "tum_fr1_rpy_20.oni"};
+}  // namespace
 
 void addSourceOptions(CLI::App& command, SourceArguments& args) {
   command.add_option("--intrinsics", args.intrinsics,
                      "Camera intrinsics 'fx,fy,cx,cy[,width,height]' or a YAML file with those "
                      "keys; overrides what the source carries");
-  command.add_option("--depth-scale", args.depth_units_per_m,
-                     "Raw depth units per metre of a dataset folder (TUM 5000, millimetre "
-                     "formats 1000); default: the layout's own")
+  command
+      .add_option("--depth-scale", args.depth_units_per_m,
+                  "Raw depth units per metre of a dataset folder (TUM 5000, millimetre "
+                  "formats 1000); default: the layout's own")
       ->check(CLI::PositiveNumber);
   command.add_option("--max-frames", args.max_frames, "Stop after this many frames (0: all)")
       ->capture_default_str();
 }
 
-std::unique_ptr<core::FrameSource> openSource(const std::string& spec, const SourceArguments& args) {
+std::unique_ptr<core::FrameSource> openSource(const std::string& spec,
+                                              const SourceArguments& args) {
   std::optional<core::Intrinsics> intrinsics;
   if (!args.intrinsics.empty()) intrinsics = core::parseIntrinsicsSpec(args.intrinsics);
   std::error_code ec;
@@ -45,14 +48,15 @@ std::unique_ptr<core::FrameSource> openSource(const std::string& spec, const Sou
     options.intrinsics = intrinsics;
     return std::make_unique<drivers::oni::OniSource>(spec, options);
   }
-  if (const auto ext = fs::path(spec).extension(); (ext == ".yaml" || ext == ".yml") &&
-                                                   fs::is_regular_file(spec, ec)) {
+  if (const auto ext = fs::path(spec).extension();
+      (ext == ".yaml" || ext == ".yml") && fs::is_regular_file(spec, ec)) {
     return std::make_unique<drivers::synthetic::SyntheticSource>(spec);
   }
   if (fs::exists(spec, ec)) {
     throw core::SourceError(fmt::format(
         "{}: not a source tessera can read; SOURCE must be an OpenNI2 recording (.oni), a "
-        "synthetic scene (.yaml) or a recorded dataset folder (TUM RGB-D, 7-Scenes, Redwood or slambook layout)",
+        "synthetic scene (.yaml) or a recorded dataset folder (TUM RGB-D, 7-Scenes, Redwood or "
+        "slambook layout)",
         spec));
   }
   throw core::SourceError(fmt::format("{}: no such file or folder", spec));
@@ -63,14 +67,16 @@ fs::path defaultRecording() {
   if (const char* env = std::getenv("TESSERA_RECORDINGS")) candidates.emplace_back(env);
   candidates.emplace_back("recordings");
   candidates.emplace_back(fs::path(TESSERA_SOURCE_DIR) / "recordings");
-  for (const fs::path& dir : candidates) {
-    std::error_code ec;
-    if (fs::is_regular_file(dir / kDefaultRecording, ec)) return dir / kDefaultRecording;
+  for (const char* name : kDefaultRecordings) {
+    for (const fs::path& dir : candidates) {
+      std::error_code ec;
+      if (fs::is_regular_file(dir / name, ec)) return dir / name;
+    }
   }
-  throw core::SourceError(fmt::format(
-      "no SOURCE given and the default recording '{}' was not found in $TESSERA_RECORDINGS, "
-      "./recordings or {}/recordings",
-      kDefaultRecording, TESSERA_SOURCE_DIR));
+  throw core::SourceError(
+      fmt::format("no SOURCE given and no default recording (office.oni, rendered by the build, or "
+                  "tum_fr1_rpy_20.oni) in $TESSERA_RECORDINGS, ./recordings or {}/recordings",
+                  TESSERA_SOURCE_DIR));
 }
 
 }  // namespace tessera::cli
