@@ -2,6 +2,7 @@
 #include <spdlog/spdlog.h>
 #include <CLI/CLI.hpp>
 
+#include "eval_command.h"
 #include "record_command.h"
 #include "run_command.h"
 #include "tessera/core/error.h"
@@ -22,6 +23,8 @@ int main(int argc, char** argv) {
   CLI::App* record = tessera::cli::addRecordCommand(app, record_args);
   tessera::cli::RecordArguments synth_args;
   CLI::App* synth = tessera::cli::addSynthCommand(app, synth_args);
+  tessera::cli::EvalArguments eval_args;
+  CLI::App* eval = tessera::cli::addEvalCommand(app, eval_args);
 
   CLI11_PARSE(app, argc, argv);
   try {
@@ -33,5 +36,6 @@ int main(int argc, char** argv) {
   if (run->parsed()) return tessera::cli::runCommand(run_args);
   if (record->parsed()) return tessera::cli::recordCommand(record_args);
   if (synth->parsed()) return tessera::cli::synthCommand(synth_args);
+  if (eval->parsed()) return tessera::cli::evalCommand(eval_args);
   return 0;
 }

@@ -47,7 +47,7 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
 
   SourceStage source_stage(source, options.max_frames);
   FusionStage fusion_stage(config.tsdf, threads);
-  StatsSink sink(options.out_dir / "stats.jsonl", total, options.on_progress);
+  StatsSink sink(options.out_dir, total, options.on_progress);
 
   const auto start = std::chrono::steady_clock::now();
   runGraph(source_stage, fusion_stage, sink, {threads, config.pipeline.max_frames_in_flight});

@@ -51,6 +51,7 @@ FusedFrame FusionStage::process(core::Frame frame) {
       try {
         map_.integrate(frame, *frame.T_W_C_gt);
         fused.integrated = true;
+        fused.T_W_C = frame.T_W_C_gt;
       } catch (const core::Error& e) {
         fused.skip_reason = e.what();
         spdlog::warn("fusion skipped {}", e.what());
@@ -64,15 +65,20 @@ FusedFrame FusionStage::process(core::Frame frame) {
   return fused;
 }
 
-StatsSink::StatsSink(const std::filesystem::path& stats_path,
-                     std::optional<std::size_t> frames_total, ProgressCallback on_progress)
-    : stats_path_(stats_path),
-      stats_(stats_path),
+StatsSink::StatsSink(const std::filesystem::path& out_dir, std::optional<std::size_t> frames_total,
+                     ProgressCallback on_progress)
+    : stats_path_(out_dir / "stats.jsonl"),
+      trajectory_path_(out_dir / "trajectory.txt"),
+      stats_(stats_path_),
+      trajectory_(trajectory_path_),
       frames_total_(frames_total),
       on_progress_(std::move(on_progress)),
       start_(std::chrono::steady_clock::now()) {
-  if (!stats_)
-    throw core::Error(fmt::format("{}: cannot create the stats file", stats_path.string()));
+  for (const auto& [file, path] :
+       {std::pair{&stats_, &stats_path_}, {&trajectory_, &trajectory_path_}}) {
+    if (!*file) throw core::Error(fmt::format("{}: cannot be created", path->string()));
+  }
+  trajectory_ << "# camera poses T_W_C the frames were fused at: timestamp tx ty tz qx qy qz qw\n";
 }
 
 void StatsSink::process(const FusedFrame& fused) {
@@ -95,7 +101,15 @@ void StatsSink::process(const FusedFrame& fused) {
                            {"textures_stored", 0}};
     if (!fused.integrated) line["skip_reason"] = fused.skip_reason;
     stats_ << line.dump() << '\n';
-    if (!stats_) {
+    if (fused.T_W_C) {
+      const Eigen::Quaterniond q(fused.T_W_C->rotation());
+      const Eigen::Vector3d t = fused.T_W_C->translation();
+      trajectory_ << fmt::format("{}.{:09d} {:.6f} {:.6f} {:.6f} {:.9f} {:.9f} {:.9f} {:.9f}\n",
+                                 fused.frame.timestamp_ns / 1'000'000'000,
+                                 fused.frame.timestamp_ns % 1'000'000'000, t.x(), t.y(), t.z(),
+                                 q.x(), q.y(), q.z(), q.w());
+    }
+    if (!stats_ || !trajectory_) {
       write_failed_ = true;
       spdlog::error("{}: writing failed (disk full?); no further stats lines",
                     stats_path_.string());
@@ -106,9 +120,10 @@ void StatsSink::process(const FusedFrame& fused) {
 
 void StatsSink::flush() {
   stats_.close();
-  if (write_failed_ || stats_.fail()) {
-    throw core::Error(
-        fmt::format("{}: could not be written completely (disk full?)", stats_path_.string()));
+  trajectory_.close();
+  if (write_failed_ || stats_.fail() || trajectory_.fail()) {
+    throw core::Error(fmt::format("{} or {}: could not be written completely (disk full?)",
+                                  stats_path_.string(), trajectory_path_.string()));
   }
 }
 

@@ -1,4 +1,5 @@
 #include <fstream>
+#include <sstream>
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -90,6 +91,20 @@ TEST(Pipeline, RunsEveryGoodFrameAndWritesTheOutputs) {
     }
   }
   EXPECT_EQ(lines[3]["index"], 4);  // frame 3 was bad
+
+  // trajectory.txt: a comment, then the 7 poses the frames were fused at, in TUM format.
+  std::ifstream trajectory(out / "trajectory.txt");
+  std::string line;
+  std::getline(trajectory, line);
+  EXPECT_EQ(line[0], '#');
+  int poses = 0;
+  double t = 0, tx = 0;
+  while (std::getline(trajectory, line)) {
+    std::istringstream(line) >> t >> tx;
+    ++poses;
+  }
+  EXPECT_EQ(poses, 7);
+  EXPECT_NEAR(tx, 0.02 * 7, 1e-6);  // the last frame, index 7, sits at x = 0.14
 
   std::ifstream report_file(out / "report.json");
   const auto report = nlohmann::json::parse(report_file);

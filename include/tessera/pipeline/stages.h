@@ -43,6 +43,7 @@ class SourceStage {
 struct FusedFrame {
   core::Frame frame;
   bool integrated = false;
+  std::optional<core::Isometry> T_W_C;  // the pose it was fused at
   std::string skip_reason;  // why the frame was not integrated
   std::size_t tsdf_bytes = 0;
   double fusion_ms = 0.0;
@@ -77,17 +78,19 @@ struct Progress {
   std::size_t map_bytes = 0;
 };
 
-// Writes one stats.jsonl line per frame and keeps the running totals.
+// Writes one stats.jsonl line per frame and the poses frames were fused at (trajectory.txt,
+// TUM format), and keeps the running totals.
 class StatsSink {
  public:
   using ProgressCallback = std::function<void(const Progress&)>;
 
-  // Throws core::Error naming the file when it cannot be created.
-  StatsSink(const std::filesystem::path& stats_path, std::optional<std::size_t> frames_total,
+  // Creates OUT/stats.jsonl and OUT/trajectory.txt; throws core::Error naming a file that
+  // cannot be created.
+  StatsSink(const std::filesystem::path& out_dir, std::optional<std::size_t> frames_total,
             ProgressCallback on_progress);
 
   void process(const FusedFrame& fused);
-  // Closes the stats file; throws core::Error naming it when writing failed (disk full).
+  // Closes the files; throws core::Error naming one whose writing failed (disk full).
   void flush();
 
   std::size_t framesDone() const { return frames_done_; }
@@ -96,7 +99,9 @@ class StatsSink {
 
  private:
   std::filesystem::path stats_path_;
+  std::filesystem::path trajectory_path_;
   std::ofstream stats_;
+  std::ofstream trajectory_;
   std::optional<std::size_t> frames_total_;
   ProgressCallback on_progress_;
   std::chrono::steady_clock::time_point start_;

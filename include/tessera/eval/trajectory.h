@@ -1,0 +1,34 @@
+#pragma once
+// Camera trajectories and the absolute trajectory error (ATE) as the TUM RGB-D benchmark
+// defines it: associate poses by timestamp, align the estimate to the ground truth with the
+// rigid transform that minimises the squared error (Horn 1987, via Eigen's Umeyama without
+// scale), then take the RMSE of the translation differences.
+#include <cstdint>
+#include <filesystem>
+#include <map>
+#include <optional>
+
+#include "tessera/core/pose.h"
+
+namespace tessera::eval {
+
+using Trajectory = std::map<std::int64_t, core::Isometry>;  // timestamp ns -> T_W_C
+
+// TUM format: "timestamp tx ty tz qx qy qz qw" per line, '#' comments. Throws core::Error
+// naming the file and line.
+Trajectory readTumTrajectory(const std::filesystem::path& path);
+
+struct AteResult {
+  std::size_t pairs = 0;   // poses matched by timestamp
+  double rmse_m = 0.0;
+  double max_m = 0.0;
+  core::Isometry T_gt_est = core::Isometry::Identity();  // aligns the estimate to the truth
+};
+
+// Matches each estimated pose to the ground-truth pose nearest in time within max_dt_ns.
+// Returns nothing when fewer than 3 poses match.
+std::optional<AteResult> absoluteTrajectoryError(const Trajectory& estimate,
+                                                 const Trajectory& ground_truth,
+                                                 std::int64_t max_dt_ns = 20'000'000);
+
+}  // namespace tessera::eval
