@@ -185,6 +185,13 @@ TEST(OniSource, PlaysTheCommittedDefaultRecordingWithItsGroundTruth) {
     EXPECT_EQ(frame.rgb.size(), cv::Size(640, 480));
   }
   EXPECT_NEAR(frames[0].T_W_C_gt->translation().x(), 1.27657, 1e-4);
+
+  source.rewind();  // plays again from the first frame
+  const core::ReadResult again = source.read();
+  ASSERT_EQ(again.status, core::ReadStatus::kFrame);
+  EXPECT_EQ(again.frame.index, 0u);
+  EXPECT_EQ(again.frame.timestamp_ns, frames[0].timestamp_ns);
+  EXPECT_TRUE(identical(again.frame.depth_mm, frames[0].depth_mm));
 }
 
 }  // namespace

@@ -64,7 +64,25 @@ struct OniSource::Device {
 };
 
 OniSource::OniSource(const std::filesystem::path& path, const OniSourceOptions& options)
-    : path_(path), options_(options), device_(std::make_unique<Device>()) {
+    : path_(path), options_(options) {
+  open();
+}
+
+void OniSource::rewind() {
+  // OpenNI2's seek hangs or crashes inside the file driver: start again from a fresh device.
+  closeDevice();
+  poses_by_timestamp_us_.clear();
+  frames_out_ = 0;
+  ended_ = false;
+  truncation_.clear();
+  salvage_copy_.clear();
+  open();
+}
+
+void OniSource::open() {
+  const std::filesystem::path& path = path_;
+  const OniSourceOptions& options = options_;
+  device_ = std::make_unique<Device>();
   std::error_code ec;
   if (!std::filesystem::is_regular_file(path, ec)) {
     throw core::SourceError(fmt::format("{}: no such recording", path.string()));
@@ -176,7 +194,10 @@ OniSource::OniSource(const std::filesystem::path& path, const OniSourceOptions& 
   spdlog::info("intrinsics {} from {}", intrinsics_.describe(), intrinsics_origin_);
 }
 
-OniSource::~OniSource() {
+OniSource::~OniSource() { closeDevice(); }
+
+void OniSource::closeDevice() {
+  if (!device_) return;
   device_->depth.stop();
   device_->depth.destroy();
   if (device_->has_colour) {
@@ -188,6 +209,7 @@ OniSource::~OniSource() {
     std::error_code ec;
     std::filesystem::remove(salvage_copy_, ec);
   }
+  device_.reset();
 }
 
 bool OniSource::hasColour() const { return device_->has_colour; }

@@ -32,12 +32,18 @@ class OniSource : public core::FrameSource {
   std::string name() const override { return path_.string(); }
   std::optional<std::size_t> frameCount() const override;
 
+  // Starts again from the first frame (by reopening the file: OpenNI2's seek is unreliable).
+  void rewind();
+
   const core::Intrinsics& intrinsics() const { return intrinsics_; }
   const std::string& intrinsicsOrigin() const { return intrinsics_origin_; }
   bool hasColour() const;
 
  private:
   struct Device;
+  void open();
+  void closeDevice();
+
   std::filesystem::path path_;
   OniSourceOptions options_;
   std::unique_ptr<Device> device_;
