@@ -67,6 +67,7 @@ int recordFrames(core::FrameSource& source, const RecordArguments& args,
       writer = std::make_unique<drivers::oni::OniWriter>(args.output, frame.intrinsics,
                                                          frame.rgb.size(), options);
       ground_truth.setIntrinsics(frame.intrinsics);
+      if (frame.colour_camera) ground_truth.setColourCamera(*frame.colour_camera);
     }
     writer->write(frame);
     ground_truth.addFrame(frame);

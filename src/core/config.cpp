@@ -1,5 +1,6 @@
 #include "tessera/core/config.h"
 
+#include <optional>
 #include <set>
 
 #include <fmt/format.h>
@@ -57,15 +58,23 @@ std::vector<double> numbersOf(const YAML::Node& node, const std::string& origin,
   return values;
 }
 
-template <typename T>
-void readScalar(ConfigSection::State& state, const std::string& path, T& value,
-                const char* type_name) {
+// The node at `path`, remembered as used; nothing (and remembered as absent) when missing.
+std::optional<YAML::Node> presentNode(ConfigSection::State& state, const std::string& path) {
   const YAML::Node node = lookup(state.root, path);
   if (!node.IsDefined() || node.IsNull()) {
     state.absent.insert(path);
-    return;
+    return std::nullopt;
   }
   state.used.insert(path);
+  return node;
+}
+
+template <typename T>
+void readScalar(ConfigSection::State& state, const std::string& path, T& value,
+                const char* type_name) {
+  const auto present = presentNode(state, path);
+  if (!present) return;
+  const YAML::Node& node = *present;
   if (!node.IsScalar()) {
     throw ConfigError(fmt::format("{}: key '{}' must be {}", state.origin, path, type_name));
   }
@@ -115,29 +124,21 @@ void ConfigSection::read(std::string_view key, std::string& value) const {
 
 void ConfigSection::read(std::string_view key, std::vector<double>& value) const {
   const std::string path = joinPath(path_, key);
-  const YAML::Node node = lookup(document_->root, path);
-  if (!node.IsDefined() || node.IsNull()) {
-    document_->absent.insert(path);
-    return;
+  if (const auto node = presentNode(*document_, path)) {
+    value = numbersOf(*node, document_->origin, path);
   }
-  document_->used.insert(path);
-  value = numbersOf(node, document_->origin, path);
 }
 
 void ConfigSection::read(std::string_view key, std::vector<std::vector<double>>& value) const {
   const std::string path = joinPath(path_, key);
-  const YAML::Node node = lookup(document_->root, path);
-  if (!node.IsDefined() || node.IsNull()) {
-    document_->absent.insert(path);
-    return;
-  }
-  document_->used.insert(path);
-  if (!node.IsSequence()) {
+  const auto node = presentNode(*document_, path);
+  if (!node) return;
+  if (!node->IsSequence()) {
     throw ConfigError(
         fmt::format("{}: key '{}' must be a list of lists of numbers", document_->origin, path));
   }
   value.clear();
-  for (const auto& row : node) value.push_back(numbersOf(row, document_->origin, path));
+  for (const auto& row : *node) value.push_back(numbersOf(row, document_->origin, path));
 }
 
 bool ConfigSection::has(std::string_view key) const {

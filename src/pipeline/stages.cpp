@@ -5,6 +5,7 @@
 #include <nlohmann/json.hpp>
 
 #include "tessera/core/error.h"
+#include "tessera/core/registration.h"
 
 namespace tessera::pipeline {
 
@@ -49,6 +50,7 @@ FusedFrame FusionStage::process(core::Frame frame) {
       fused.skip_reason = "no pose (camera tracking is not implemented yet; ground truth only)";
     } else {
       try {
+        if (frame.colour_camera) frame = core::withRegisteredColour(std::move(frame));
         map_.integrate(frame, *frame.T_W_C_gt);
         fused.integrated = true;
         fused.T_W_C = frame.T_W_C_gt;

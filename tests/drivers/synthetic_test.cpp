@@ -7,6 +7,7 @@
 
 #include "support/test_data.h"
 #include "tessera/core/error.h"
+#include "tessera/drivers/oni/ground_truth_file.h"
 #include "tessera/drivers/oni/oni_source.h"
 #include "tessera/drivers/oni/oni_writer.h"
 #include "tessera/drivers/synthetic/renderer.h"
@@ -193,6 +194,34 @@ TEST(SyntheticRecording, RoundTripsThroughOpenNi2BitExact) {
     EXPECT_EQ(back.frame.timestamp_ns, frame.timestamp_ns);
   }
   EXPECT_EQ(playback.read().status, core::ReadStatus::kEndOfData);
+}
+
+TEST(SyntheticRecording, UnregisteredColourKeepsItsCameraThroughTheRecording) {
+  // The office scene with its colour camera 2.5 cm beside the depth camera.
+  const fs::path dir = test::freshTempDir();
+  std::ifstream office(officeScene());
+  std::ofstream(dir / "office_unregistered.yaml") << "colour_registered: false\n" << office.rdbuf();
+  SyntheticSource source(dir / "office_unregistered.yaml");
+  const core::Frame frame = source.read().frame;
+  ASSERT_TRUE(frame.colour_camera.has_value());
+  EXPECT_NEAR(frame.colour_camera->T_RGB_D.translation().x(), -0.025, 1e-12);
+
+  const fs::path path = dir / "unregistered.oni";
+  oni::GroundTruthFile ground_truth;
+  ground_truth.setIntrinsics(frame.intrinsics);
+  ground_truth.setColourCamera(*frame.colour_camera);
+  ground_truth.addFrame(frame);
+  {
+    oni::OniWriter writer(path, frame.intrinsics, frame.rgb.size());
+    writer.write(frame);
+    writer.close();
+  }
+  ground_truth.write(oni::groundTruthPath(path));
+  oni::OniSource playback(path);
+  const core::ReadResult back = playback.read();
+  ASSERT_EQ(back.status, core::ReadStatus::kFrame);
+  ASSERT_TRUE(back.frame.colour_camera.has_value());
+  EXPECT_TRUE(back.frame.colour_camera->T_RGB_D.isApprox(frame.colour_camera->T_RGB_D, 1e-9));
 }
 
 }  // namespace

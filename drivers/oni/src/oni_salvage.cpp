@@ -5,17 +5,14 @@
 
 #include <fmt/format.h>
 
+#include "oni_format.h"
 #include "tessera/core/error.h"
 
 namespace tessera::drivers::oni::internal {
 
 namespace {
 
-constexpr std::uint32_t kRecordMagic = 0x0052494E;
-constexpr std::uint32_t kNodeAdded = 0x0D;
-constexpr std::uint32_t kNewData = 0x0A;
-constexpr std::uint32_t kEnd = 0x0B;
-constexpr std::uint32_t kDepthNode = 2;
+using namespace format;  // NOLINT: the record names read best unqualified here
 
 template <typename T>
 T readLe(const unsigned char* p) {
@@ -30,8 +27,9 @@ OniDiagnosis diagnoseOni(const std::filesystem::path& path) {
   OniDiagnosis result;
   std::ifstream in(path, std::ios::binary);
   const auto size = std::filesystem::file_size(path);
-  unsigned char header[24];
-  if (!in.read(reinterpret_cast<char*>(header), 24) || std::memcmp(header, "NI10", 4) != 0) {
+  unsigned char header[kFileHeaderBytes];
+  if (!in.read(reinterpret_cast<char*>(header), kFileHeaderBytes) ||
+      std::memcmp(header, "NI10", 4) != 0) {
     result.problem = "not an ONI recording (no NI10 header)";
     return result;
   }
@@ -43,7 +41,7 @@ OniDiagnosis diagnoseOni(const std::filesystem::path& path) {
     return result;
   }
   result.header_ok = true;
-  std::uint64_t offset = 24;
+  std::uint64_t offset = kFileHeaderBytes;
   std::uint32_t depth_node = 0;
   std::vector<unsigned char> fields;
   while (offset < size) {

@@ -15,6 +15,7 @@
 
 #include "oni_salvage.h"
 #include "tessera/core/error.h"
+#include "tessera/drivers/oni/ground_truth_file.h"
 
 namespace tessera::drivers::oni {
 
@@ -72,6 +73,7 @@ void OniSource::rewind() {
   // OpenNI2's seek hangs or crashes inside the file driver: start again from a fresh device.
   closeDevice();
   poses_by_timestamp_us_.clear();
+  colour_camera_.reset();
   frames_out_ = 0;
   ended_ = false;
   truncation_.clear();
@@ -159,9 +161,7 @@ void OniSource::open() {
     intrinsics_ = *options.intrinsics;
     intrinsics_origin_ = "--intrinsics";
   } else if (gt.contains("intrinsics")) {
-    const auto& k = gt["intrinsics"];
-    intrinsics_.fx = k.value("fx", 0.0), intrinsics_.fy = k.value("fy", 0.0);
-    intrinsics_.cx = k.value("cx", 0.0), intrinsics_.cy = k.value("cy", 0.0);
+    intrinsics_ = intrinsicsFromJson(gt["intrinsics"]);
     intrinsics_origin_ = sidecar.string();
   } else {
     const double hfov = d.depth.getHorizontalFieldOfView(), vfov = d.depth.getVerticalFieldOfView();
@@ -178,15 +178,17 @@ void OniSource::open() {
   }
   intrinsics_.width = mode.getResolutionX();
   intrinsics_.height = mode.getResolutionY();
-  if (gt.contains("frames")) {
-    for (const auto& frame : gt["frames"]) {
-      if (!frame.contains("T_W_C") || !frame.contains("timestamp_ns")) continue;
-      const auto p = frame["T_W_C"].get<std::vector<double>>();  // tx ty tz qx qy qz qw
-      const auto t_ns = frame["timestamp_ns"].get<std::int64_t>();
-      if (p.size() != 7) continue;
-      poses_by_timestamp_us_[(t_ns + 500) / 1000] = core::isometryFromTranslationQuaternion(
-          Eigen::Vector3d(p[0], p[1], p[2]), p[3], p[4], p[5], p[6]);
-    }
+  if (gt.contains("colour_camera") && gt["colour_camera"].is_object()) {
+    const auto& camera = gt["colour_camera"];
+    const auto T_RGB_D = poseFromJson(camera.value("T_RGB_D", nlohmann::json()));
+    if (T_RGB_D)
+      colour_camera_ = core::ColourCamera{intrinsicsFromJson(camera["intrinsics"]), *T_RGB_D};
+  }
+  const nlohmann::json no_frames = nlohmann::json::array();
+  for (const auto& frame : gt.is_object() ? gt.value("frames", no_frames) : no_frames) {
+    const auto pose = poseFromJson(frame.value("T_W_C", nlohmann::json()));
+    if (!pose || !frame.contains("timestamp_ns")) continue;
+    poses_by_timestamp_us_[(frame["timestamp_ns"].get<std::int64_t>() + 500) / 1000] = *pose;
   }
   spdlog::info("{}: ONI recording, {} depth frames{}, {} with ground-truth pose", path.string(),
                d.depth_frames, d.has_colour ? " with colour" : " (no colour)",
@@ -287,6 +289,7 @@ core::ReadResult OniSource::read() {
   frame.timestamp_ns = depth->timestamp_us * 1000;
   frame.depth_mm = std::move(depth->image);
   if (colour) frame.rgb = std::move(colour->image);
+  frame.colour_camera = colour_camera_;
   frame.intrinsics = intrinsics_;
   if (const auto pose = poses_by_timestamp_us_.find(depth->timestamp_us);
       pose != poses_by_timestamp_us_.end()) {

@@ -9,24 +9,14 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "oni_format.h"
 #include "tessera/core/error.h"
 
 namespace tessera::drivers::oni {
 
 namespace {
 
-// Record types (docs/ONI.md).
-constexpr std::uint32_t kRecordMagic = 0x0052494E;
-constexpr std::uint32_t kIntProperty = 0x03;
-constexpr std::uint32_t kGeneralProperty = 0x06;
-constexpr std::uint32_t kNodeRemoved = 0x07;
-constexpr std::uint32_t kNodeDataBegin = 0x08;
-constexpr std::uint32_t kNodeStateReady = 0x09;
-constexpr std::uint32_t kNewData = 0x0A;
-constexpr std::uint32_t kEnd = 0x0B;
-constexpr std::uint32_t kNodeAdded = 0x0D;
-constexpr std::uint32_t kSeekTable = 0x0E;
-constexpr std::size_t kRecordHeaderBytes = 28;
+using namespace format;  // NOLINT: the record names read best unqualified here
 constexpr std::uint64_t kNoLimit = std::numeric_limits<std::uint64_t>::max();
 // Seek-table entries carry a non-zero configuration id so the player never mistakes them for
 // the all-zero entry 0.
@@ -121,7 +111,7 @@ void OniWriter::writeNodeAdded(const Stream& stream, bool depth, std::uint32_t f
                                std::uint64_t max_ts, std::uint64_t seek_table_offset) {
   Bytes fields;
   fields.str(depth ? "Depth" : "Image");
-  fields.u32(depth ? 2 : 3);  // node type: depth or image
+  fields.u32(depth ? kDepthNode : kImageNode);
   const bool raw = depth ? options_.depth_codec == DepthCodec::kNone
                          : options_.colour_codec == ColourCodec::kNone;
   fields.u32(raw ? fourcc("NONE") : fourcc(depth ? "16zT" : "JPEG"));

@@ -146,7 +146,14 @@ core::ReadResult SyntheticSource::read() {
   frame.timestamp_ns = scene_.timestampNs(i);
   frame.intrinsics = scene_.sensor.intrinsics;
   frame.T_W_C_gt = scene_.cameraPose(i);
-  const CleanView view = renderClean(scene_, frame.intrinsics, *frame.T_W_C_gt);
+  CleanView view = renderClean(scene_, frame.intrinsics, *frame.T_W_C_gt);
+  if (!scene_.sensor.colour_registered) {
+    // Colour from its own camera beside the depth camera, with the same lens.
+    core::Isometry T_D_RGB = core::Isometry::Identity();
+    T_D_RGB.translation().x() = scene_.sensor.colour_baseline_m;
+    view.colour = renderClean(scene_, frame.intrinsics, *frame.T_W_C_gt * T_D_RGB).colour;
+    frame.colour_camera = core::ColourCamera{frame.intrinsics, T_D_RGB.inverse()};
+  }
   applySensor(
       scene_.sensor, view,
       static_cast<std::uint64_t>(scene_.seed) * 1'000'003ULL + static_cast<std::uint64_t>(i),

@@ -211,6 +211,7 @@ Scene loadScene(const std::filesystem::path& path) {
   } catch (const core::ConfigError& e) {
     throw core::ConfigError(fmt::format("{}: sensor: {}", path.string(), e.what()));
   }
+  root.read("colour_registered", scene.sensor.colour_registered);
   if (scene.frames < 1 || !(scene.fps > 0.0)) {
     throw core::ConfigError(fmt::format("{}: frames and fps must be positive", path.string()));
   }

@@ -66,6 +66,7 @@ nlohmann::json sceneGroundTruth(const Scene& scene) {
             {"min_depth_m", sensor.min_depth_m},
             {"max_depth_m", sensor.max_depth_m},
             {"disparity_quantisation", sensor.disparity_quantisation},
+            {"colour_registered", sensor.colour_registered},
             {"noise_sigma_m",
              {{"a", sensor.noise_a_m}, {"b", sensor.noise_b}, {"c", sensor.noise_c_m}}}}},
           {"textures", textures},

@@ -10,13 +10,22 @@
 
 namespace tessera::core {
 
+// A colour camera separate from the depth camera (colour not registered to depth).
+struct ColourCamera {
+  Intrinsics intrinsics;
+  Isometry T_RGB_D = Isometry::Identity();  // depth-camera coordinates -> colour-camera ones
+};
+
 struct Frame {
   std::uint64_t index = 0;           // position in the source, from 0
   std::int64_t timestamp_ns = 0;     // capture time
   cv::Mat depth_mm;                  // CV_16UC1, millimetres, 0 = invalid
-  cv::Mat rgb;                       // CV_8UC3 in R, G, B order, registered to depth
-  Intrinsics intrinsics;             // of depth_mm (and of rgb when it has the same size)
+  cv::Mat rgb;                       // CV_8UC3 in R, G, B order
+  Intrinsics intrinsics;             // of depth_mm (and of a registered rgb)
   std::optional<Isometry> T_W_C_gt;  // ground-truth camera-to-world pose, when the source has one
+  // Set when rgb comes from its own camera; empty when rgb is registered to depth, pixel for
+  // pixel. core::registerColourToDepth() resamples it onto the depth image.
+  std::optional<ColourCamera> colour_camera;
 };
 
 }  // namespace tessera::core

@@ -14,6 +14,8 @@ namespace tessera::drivers::oni {
 class GroundTruthFile {
  public:
   void setIntrinsics(const core::Intrinsics& intrinsics);
+  // For colour from its own camera: its intrinsics and T_RGB_D.
+  void setColourCamera(const core::ColourCamera& camera);
   void addFrame(const core::Frame& frame);
   // Further top-level keys (e.g. "planes"); must not be "intrinsics" or "frames".
   nlohmann::json& extra() { return extra_; }
@@ -24,6 +26,7 @@ class GroundTruthFile {
 
  private:
   nlohmann::json intrinsics_;
+  nlohmann::json colour_camera_;  // null when colour is registered to depth
   nlohmann::json frames_ = nlohmann::json::array();
   nlohmann::json extra_ = nlohmann::json::object();
   std::size_t frames_with_pose_ = 0;
@@ -31,5 +34,10 @@ class GroundTruthFile {
 
 // Pose as the sidecar stores it: [tx, ty, tz, qx, qy, qz, qw] (TUM order).
 nlohmann::json poseToJson(const core::Isometry& T);
+// The inverse: nothing unless the value is such a list of seven numbers.
+std::optional<core::Isometry> poseFromJson(const nlohmann::json& value);
+
+nlohmann::json intrinsicsToJson(const core::Intrinsics& k);
+core::Intrinsics intrinsicsFromJson(const nlohmann::json& value);
 
 }  // namespace tessera::drivers::oni

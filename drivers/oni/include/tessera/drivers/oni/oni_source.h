@@ -50,6 +50,7 @@ class OniSource : public core::FrameSource {
   core::Intrinsics intrinsics_;
   std::string intrinsics_origin_;
   std::map<std::int64_t, core::Isometry> poses_by_timestamp_us_;
+  std::optional<core::ColourCamera> colour_camera_;  // from the sidecar, for unregistered colour
   std::size_t frames_out_ = 0;
   bool ended_ = false;
   std::filesystem::path salvage_copy_;  // playable copy of a truncated file, removed at the end

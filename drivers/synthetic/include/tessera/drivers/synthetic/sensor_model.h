@@ -30,6 +30,10 @@ struct SensorProfile {
   double edge_dropout = 0.6;         // probability an edge pixel is lost
   double colour_noise_sigma = 2.0;   // 8-bit levels
   double colour_blur_sigma_px = 0.6;
+  // Colour registered to depth (rendered from the depth camera), or taken by its own camera
+  // `colour_baseline_m` along the depth camera's +x axis, as an unregistered Kinect delivers it.
+  bool colour_registered = true;
+  double colour_baseline_m = 0.025;
 
   // Named profiles: "kinect_v1" (640x480), "kinect_v2" (512x424 time of flight, no
   // quantisation), "ideal" (kinect_v1 geometry, no noise, no dropouts, no blur).
