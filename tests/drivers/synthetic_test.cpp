@@ -4,6 +4,7 @@
 
 #include <gtest/gtest.h>
 #include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
 
 #include "support/test_data.h"
 #include "tessera/core/error.h"
@@ -56,6 +57,30 @@ TEST(SyntheticTextures, PeriodicGeneratorsRepeatExactlyOnTheirLattice) {
   EXPECT_NEAR(brick[1].y(), 0.065 + 0.01, 1e-12);
   EXPECT_FALSE(scene.textures.at("poster_a")->lattice().has_value());
   EXPECT_FALSE(scene.textures.at("plaster")->lattice().has_value());
+}
+
+TEST(SyntheticTextures, ImageTexturesSampleTheirPixelsAndTileExactly) {
+  TESSERA_REQUIRE_SHARED("textures/gimp_patterns");
+  const fs::path image = test::sharedData() / "textures/gimp_patterns/png/Fabric__burlap.png";
+  const fs::path dir = test::freshTempDir();
+  std::ofstream(dir / "scene.yaml")
+      << "textures:\n"
+      << "  - {id: cloth, generator: image, image: " << image.string()
+      << ", width_m: 0.192, tile: true}\n"
+      << "camera: {waypoints: [{position: [0, 0, 1], look_at: [1, 0, 1]}]}\n";
+  const Scene scene = loadScene(dir / "scene.yaml");
+  const Texture& cloth = *scene.textures.at("cloth");
+  expectExactLattice(cloth);
+  EXPECT_NEAR((*cloth.lattice())[0].x(), 0.192, 1e-12);  // 96 pixels of 2 mm
+  // Texel centres give the pixels themselves; image row 0 is the top (largest t).
+  cv::Mat bgr = cv::imread(image.string(), cv::IMREAD_COLOR);
+  const double texel = 0.192 / 96;
+  for (const auto& [row, col] : {std::pair{0, 0}, {10, 70}, {95, 3}}) {
+    const cv::Vec3b pixel = bgr.at<cv::Vec3b>(row, col);
+    const cv::Vec3f c = cloth.colour((col + 0.5) * texel, (95 - row + 0.5) * texel);
+    EXPECT_NEAR(c[0], pixel[2], 1e-3);  // R
+    EXPECT_NEAR(c[2], pixel[0], 1e-3);  // B
+  }
 }
 
 // Back-projects every valid depth pixel at the ground-truth pose and measures its distance to
