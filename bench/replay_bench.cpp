@@ -3,7 +3,8 @@
 //
 //   replay_bench [SOURCE] [--repeat N] [--threads N] [--max-frames N]
 //
-// SOURCE defaults to ../shared/data/rgbd/tum_fr1_rpy_40, else the committed default recording.
+// SOURCE (a dataset folder or an .oni recording) defaults to ../shared/data/rgbd/tum_fr1_rpy_40,
+// else the committed recordings/tum_fr1_rpy_20.oni.
 #include <algorithm>
 #include <filesystem>
 #include <map>
@@ -15,6 +16,7 @@
 #include "tessera/core/error.h"
 #include "tessera/core/log.h"
 #include "tessera/drivers/dataset_source.h"
+#include "tessera/drivers/oni/oni_source.h"
 #include "tessera/pipeline/flow_graph.h"
 #include "tessera/pipeline/run.h"
 
@@ -45,7 +47,7 @@ int main(int argc, char** argv) {
     const fs::path shared = fs::path(TESSERA_SOURCE_DIR) / "../shared/data/rgbd/tum_fr1_rpy_40";
     source_path = fs::is_directory(shared)
                       ? shared.lexically_normal().string()
-                      : (fs::path(TESSERA_SOURCE_DIR) / "recordings/tum_fr1_rpy_20").string();
+                      : (fs::path(TESSERA_SOURCE_DIR) / "recordings/tum_fr1_rpy_20.oni").string();
   }
   tessera::core::initLogging("warn");
   threads = threads > 0 ? threads : pipeline::defaultThreadCount();
@@ -56,13 +58,18 @@ int main(int argc, char** argv) {
     std::map<std::string, std::vector<double>> stage_median_ms, stage_alone_fps;
     std::size_t frames = 0, tsdf_bytes = 0;
     for (int run = 0; run < repeat; ++run) {
-      tessera::drivers::DatasetSource source(source_path);
+      std::unique_ptr<tessera::core::FrameSource> source;
+      if (fs::path(source_path).extension() == ".oni") {
+        source = std::make_unique<tessera::drivers::oni::OniSource>(source_path);
+      } else {
+        source = std::make_unique<tessera::drivers::DatasetSource>(source_path);
+      }
       pipeline::RunOptions options;
       options.out_dir = fs::temp_directory_path() / "tessera_replay_bench";
       options.threads = threads;
       if (max_frames > 0) options.max_frames = max_frames;
       const auto summary =
-          pipeline::runPipeline(source, pipeline::loadRunConfig(std::nullopt), options);
+          pipeline::runPipeline(*source, pipeline::loadRunConfig(std::nullopt), options);
       fps.push_back(summary.fps);
       frames = summary.frames;
       tsdf_bytes = summary.tsdf_bytes;
