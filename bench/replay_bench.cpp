@@ -1,7 +1,7 @@
 // Replay throughput: runs `tessera run`'s pipeline over a recording several times and prints
 // frames/s for the whole run and per stage (median over the repeats), plus peak memory.
 //
-//   replay_bench [SOURCE] [--repeat N] [--threads N] [--max-frames N]
+//   replay_bench [SOURCE] [--repeat N] [--threads N] [--max-frames N] [--poses track|gt]
 //
 // SOURCE (a dataset folder or an .oni recording) defaults to ../shared/data/rgbd/tum_fr1_rpy_40,
 // else the committed recordings/tum_fr1_rpy_20.oni.
@@ -37,6 +37,9 @@ int main(int argc, char** argv) {
   int repeat = 3;
   int threads = 0;
   std::size_t max_frames = 0;
+  std::string poses = "track";
+  app.add_option("--poses", poses, "track (odometry) or gt (ground-truth poses)")
+      ->check(CLI::IsMember({"track", "gt"}));
   app.add_option("SOURCE", source_path, "Dataset folder to replay");
   app.add_option("--repeat", repeat, "Runs to take the median over")->check(CLI::PositiveNumber);
   app.add_option("--threads", threads, "Worker threads (0: all cores)");
@@ -67,6 +70,8 @@ int main(int argc, char** argv) {
       pipeline::RunOptions options;
       options.out_dir = fs::temp_directory_path() / "tessera_replay_bench";
       options.threads = threads;
+      options.poses =
+          poses == "gt" ? pipeline::PoseSource::kGroundTruth : pipeline::PoseSource::kTrack;
       if (max_frames > 0) options.max_frames = max_frames;
       const auto summary =
           pipeline::runPipeline(*source, pipeline::loadRunConfig(std::nullopt), options);
@@ -80,8 +85,8 @@ int main(int argc, char** argv) {
       fmt::print("run {}: {} frames, {:.2f} s, {:.1f} frames/s\n", run + 1, summary.frames,
                  summary.wall_s, summary.fps);
     }
-    fmt::print("\nreplay of {} ({} frames, {} threads, median of {} runs)\n", source_path, frames,
-               threads, repeat);
+    fmt::print("\nreplay of {} ({} frames, {} threads, poses: {}, median of {} runs)\n",
+               source_path, frames, threads, poses, repeat);
     // The first run pays for fresh memory pages (as a `tessera run` process does); later runs
     // reuse the freed heap. Both are printed.
     fmt::print("  whole pipeline   {:8.1f} frames/s (first run {:.1f})\n", median(fps),

@@ -26,6 +26,11 @@ CLI::App* addRunCommand(CLI::App& app, RunArguments& args) {
                   "Worker threads for the flow graph, Open3D and OpenCV (0: all cores)")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
+  run->add_option("--poses", args.poses,
+                  "track: estimate camera poses (RGB-D odometry); gt: use the recording's "
+                  "ground truth")
+      ->check(CLI::IsMember({"track", "gt"}))
+      ->capture_default_str();
   addSourceOptions(*run, args.source_args);
   return run;
 }
@@ -45,6 +50,8 @@ int runCommand(const RunArguments& args) {
     pipeline::RunOptions run_options;
     run_options.out_dir = args.out_dir;
     run_options.threads = threads;
+    run_options.poses =
+        args.poses == "gt" ? pipeline::PoseSource::kGroundTruth : pipeline::PoseSource::kTrack;
     if (args.source_args.max_frames > 0) run_options.max_frames = args.source_args.max_frames;
     run_options.on_progress = [&progress](const pipeline::Progress& p) { progress.update(p); };
 
@@ -53,6 +60,10 @@ int runCommand(const RunArguments& args) {
     spdlog::info("{} frames in {:.2f} s ({:.1f} frames/s), {} integrated, {} bad, {} without pose",
                  summary.frames, summary.wall_s, summary.fps, summary.frames_integrated,
                  summary.frames_bad, summary.frames_without_pose);
+    if (summary.poses == "track") {
+      spdlog::info("tracking: {} frames lost, {} restarts", summary.tracking_losses,
+                   summary.tracking_restarts);
+    }
     spdlog::info("TSDF {:.1f} MB, mesh {} vertices, peak RSS {:.0f} MB; wrote {}/",
                  static_cast<double>(summary.tsdf_bytes) / 1e6, summary.mesh_vertices,
                  summary.peak_rss_mb, args.out_dir);

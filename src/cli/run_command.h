@@ -14,6 +14,7 @@ struct RunArguments {
   std::string config;
   std::string out_dir = "tessera_out";
   int threads = 0;
+  std::string poses = "track";
   SourceArguments source_args;
 };
 

@@ -46,7 +46,7 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
   if (total && options.max_frames) total = std::min(*total, *options.max_frames);
 
   SourceStage source_stage(source, options.max_frames);
-  FusionStage fusion_stage(config.tsdf, threads);
+  FusionStage fusion_stage(config.tsdf, config.tracker, options.poses, threads);
   StatsSink sink(options.out_dir, total, options.on_progress);
 
   const auto start = std::chrono::steady_clock::now();
@@ -60,6 +60,9 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
   summary.frames_bad = source_stage.badFrames();
   summary.frames_integrated = fusion_stage.framesIntegrated();
   summary.frames_without_pose = fusion_stage.framesSkipped();
+  summary.poses = options.poses == PoseSource::kTrack ? "track" : "gt";
+  summary.tracking_losses = fusion_stage.trackingLosses();
+  summary.tracking_restarts = fusion_stage.trackingRestarts();
   summary.source_end_problem = source_stage.endProblem();
   summary.wall_s = wall_s;
   summary.fps = wall_s > 0.0 ? static_cast<double>(summary.frames) / wall_s : 0.0;
@@ -85,6 +88,9 @@ void writeReport(const RunSummary& summary, const std::filesystem::path& path) {
       {"frames_bad", summary.frames_bad},
       {"frames_integrated", summary.frames_integrated},
       {"frames_without_pose", summary.frames_without_pose},
+      {"poses", summary.poses},
+      {"tracking_losses", summary.tracking_losses},
+      {"tracking_restarts", summary.tracking_restarts},
       {"wall_s", summary.wall_s},
       {"fps", summary.fps},
       {"peak_rss_mb", summary.peak_rss_mb},

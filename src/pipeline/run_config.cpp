@@ -16,6 +16,7 @@ RunConfig readRunConfig(const core::ConfigDocument& doc) {
   const core::ConfigSection root = doc.root();
   try {
     readConfig(root.section("pipeline"), config.pipeline);
+    fusion::readConfig(root.section("tracker"), config.tracker);
     fusion::readConfig(root.section("tsdf"), config.tsdf);
   } catch (const core::ConfigError& e) {
     const std::string message = e.what();

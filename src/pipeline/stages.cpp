@@ -38,26 +38,49 @@ std::optional<core::Frame> SourceStage::next() {
   return std::nullopt;
 }
 
-FusionStage::FusionStage(const fusion::TsdfConfig& config, int thread_cap) : map_(config) {
+FusionStage::FusionStage(const fusion::TsdfConfig& tsdf, const fusion::TrackerConfig& tracker,
+                         PoseSource poses, int thread_cap)
+    : map_(tsdf), tracker_(tracker), poses_(poses) {
   map_.setThreadCap(thread_cap);
+}
+
+std::optional<core::Isometry> FusionStage::poseOf(const core::Frame& frame, std::string& problem) {
+  if (poses_ == PoseSource::kGroundTruth) {
+    if (!frame.T_W_C_gt) problem = "no ground-truth pose (--poses gt)";
+    return frame.T_W_C_gt;
+  }
+  // Tracking starts where the ground truth says, when there is one, so that the map and the
+  // ground truth share a world frame.
+  const fusion::TrackingResult tracked =
+      tracker_.track(frame, frame.T_W_C_gt.value_or(core::Isometry::Identity()));
+  if (tracked.status == fusion::TrackingStatus::kLost) {
+    ++tracking_losses_;
+    problem = "tracking lost: " + tracked.problem;
+    return std::nullopt;
+  }
+  if (tracked.status == fusion::TrackingStatus::kRestarted) {
+    ++tracking_restarts_;
+    spdlog::warn("frame {}: tracking restarted after {} lost frames", frame.index,
+                 tracking_losses_);
+  }
+  return tracked.T_W_C;
 }
 
 FusedFrame FusionStage::process(core::Frame frame) {
   FusedFrame fused;
   {
     ScopedStageTime time(timer_);
-    if (!frame.T_W_C_gt) {
-      fused.skip_reason = "no pose (camera tracking is not implemented yet; ground truth only)";
-    } else {
-      try {
-        if (frame.colour_camera) frame = core::withRegisteredColour(std::move(frame));
-        map_.integrate(frame, *frame.T_W_C_gt);
+    try {
+      if (frame.colour_camera) frame = core::withRegisteredColour(std::move(frame));
+      fused.T_W_C = poseOf(frame, fused.skip_reason);
+      if (fused.T_W_C) {
+        map_.integrate(frame, *fused.T_W_C);
         fused.integrated = true;
-        fused.T_W_C = frame.T_W_C_gt;
-      } catch (const core::Error& e) {
-        fused.skip_reason = e.what();
-        spdlog::warn("fusion skipped {}", e.what());
       }
+    } catch (const core::Error& e) {
+      fused.T_W_C.reset();
+      fused.skip_reason = e.what();
+      spdlog::warn("fusion skipped {}", e.what());
     }
   }
   fused.fusion_ms = timer_.lastMs();

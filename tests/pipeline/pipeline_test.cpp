@@ -66,6 +66,7 @@ TEST(Pipeline, RunsEveryGoodFrameAndWritesTheOutputs) {
   RunOptions options;
   options.out_dir = out;
   options.threads = 2;
+  options.poses = PoseSource::kGroundTruth;  // so trajectory.txt holds the known poses
   std::size_t progress_calls = 0;
   options.on_progress = [&](const Progress& p) {
     ++progress_calls;
@@ -198,6 +199,11 @@ TEST(RunConfig, DefaultYamlDocumentsEveryKeyWithTheStructDefaults) {
   EXPECT_EQ(from_file.tsdf.min_depth_m, defaults.tsdf.min_depth_m);
   EXPECT_EQ(from_file.tsdf.max_depth_m, defaults.tsdf.max_depth_m);
   EXPECT_EQ(from_file.tsdf.block_resolution, defaults.tsdf.block_resolution);
+  EXPECT_EQ(from_file.tracker.max_translation_m, defaults.tracker.max_translation_m);
+  EXPECT_EQ(from_file.tracker.max_rotation_deg, defaults.tracker.max_rotation_deg);
+  EXPECT_EQ(from_file.tracker.max_depth_difference_m, defaults.tracker.max_depth_difference_m);
+  EXPECT_EQ(from_file.tracker.lost_frames_before_restart,
+            defaults.tracker.lost_frames_before_restart);
 }
 
 TEST(RunConfig, MisspelledKeyAndBadRangeNameTheFile) {

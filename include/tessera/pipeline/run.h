@@ -14,6 +14,7 @@ namespace tessera::pipeline {
 struct RunOptions {
   std::filesystem::path out_dir = "tessera_out";
   int threads = 0;  // 0: hardware threads
+  PoseSource poses = PoseSource::kTrack;
   std::optional<std::size_t> max_frames;
   StatsSink::ProgressCallback on_progress;  // may be empty
 };
@@ -31,7 +32,10 @@ struct RunSummary {
   std::size_t frames = 0;      // frames that went through the pipeline
   std::size_t frames_bad = 0;  // unreadable frames, skipped
   std::size_t frames_integrated = 0;
-  std::size_t frames_without_pose = 0;
+  std::size_t frames_without_pose = 0;  // not integrated: no pose, tracking lost, or rejected
+  std::string poses;                    // "track" or "gt"
+  std::size_t tracking_losses = 0;
+  std::size_t tracking_restarts = 0;
   std::string source_end_problem;  // non-empty when the source ended abnormally
   double wall_s = 0.0;
   double fps = 0.0;

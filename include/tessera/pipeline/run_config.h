@@ -4,6 +4,7 @@
 #include <optional>
 
 #include "tessera/core/config.h"
+#include "tessera/fusion/tracker.h"
 #include "tessera/fusion/tsdf_map.h"
 
 namespace tessera::pipeline {
@@ -16,6 +17,7 @@ void readConfig(const core::ConfigSection& section, PipelineConfig& config);
 
 struct RunConfig {
   PipelineConfig pipeline;
+  fusion::TrackerConfig tracker;
   fusion::TsdfConfig tsdf;
 };
 

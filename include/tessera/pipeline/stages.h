@@ -11,6 +11,7 @@
 #include <string>
 
 #include "tessera/core/frame_source.h"
+#include "tessera/fusion/tracker.h"
 #include "tessera/fusion/tsdf_map.h"
 #include "tessera/pipeline/stage_timer.h"
 
@@ -44,16 +45,23 @@ struct FusedFrame {
   core::Frame frame;
   bool integrated = false;
   std::optional<core::Isometry> T_W_C;  // the pose it was fused at
-  std::string skip_reason;  // why the frame was not integrated
+  std::string skip_reason;              // why the frame was not integrated
   std::size_t tsdf_bytes = 0;
   double fusion_ms = 0.0;
 };
 
-// Integrates each frame into the TSDF at its pose. Until camera tracking exists the pose is
-// the recording's ground truth; frames without one are counted and not integrated.
+// Where fusion takes camera poses from.
+enum class PoseSource {
+  kTrack,        // estimated by the tracker (the first frame starts at its ground truth, if any)
+  kGroundTruth,  // the recording's ground truth; frames without one are not integrated
+};
+
+// Tracks each frame (or takes its ground-truth pose) and integrates it into the TSDF. A frame
+// whose tracking is lost is counted and not integrated, so it cannot corrupt the map.
 class FusionStage {
  public:
-  FusionStage(const fusion::TsdfConfig& config, int thread_cap);
+  FusionStage(const fusion::TsdfConfig& tsdf, const fusion::TrackerConfig& tracker,
+              PoseSource poses, int thread_cap);
 
   FusedFrame process(core::Frame frame);
   void flush() {}
@@ -61,12 +69,20 @@ class FusionStage {
   const fusion::TsdfMap& map() const { return map_; }
   std::size_t framesIntegrated() const { return integrated_; }
   std::size_t framesSkipped() const { return skipped_; }
+  std::size_t trackingLosses() const { return tracking_losses_; }
+  std::size_t trackingRestarts() const { return tracking_restarts_; }
   const StageTimer& timer() const { return timer_; }
 
  private:
+  std::optional<core::Isometry> poseOf(const core::Frame& frame, std::string& problem);
+
   fusion::TsdfMap map_;
+  fusion::Tracker tracker_;
+  PoseSource poses_;
   std::size_t integrated_ = 0;
   std::size_t skipped_ = 0;
+  std::size_t tracking_losses_ = 0;
+  std::size_t tracking_restarts_ = 0;
   StageTimer timer_;
 };
 
