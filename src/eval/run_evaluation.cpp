@@ -42,11 +42,14 @@ nlohmann::json evaluateRun(const std::filesystem::path& run_dir,
   nlohmann::json figures = {{"ate_m", nullptr}, {"ate_max_m", nullptr}, {"ate_pairs", 0}};
   const auto trajectory_path = run_dir / "trajectory.txt";
   if (std::filesystem::exists(trajectory_path)) {
-    if (const auto ate = absoluteTrajectoryError(readTumTrajectory(trajectory_path),
-                                                 groundTruthTrajectory(gt))) {
+    const Trajectory estimate = readTumTrajectory(trajectory_path);
+    if (const auto ate = absoluteTrajectoryError(estimate, groundTruthTrajectory(gt))) {
       figures["ate_m"] = ate->rmse_m;
       figures["ate_max_m"] = ate->max_m;
       figures["ate_pairs"] = ate->pairs;
+      Trajectory aligned;
+      for (const auto& [t, pose] : estimate) aligned[t] = ate->T_gt_est * pose;
+      writeTumTrajectory(aligned, run_dir / "trajectory_aligned.txt");
     }
   }
   // Figures of stages that do not exist yet stay null (docs/METRICS.md).

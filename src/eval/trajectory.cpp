@@ -4,8 +4,8 @@
 #include <fstream>
 #include <sstream>
 
-#include <Eigen/Geometry>
 #include <fmt/format.h>
+#include <Eigen/Geometry>
 
 #include "tessera/core/error.h"
 
@@ -21,13 +21,27 @@ Trajectory readTumTrajectory(const std::filesystem::path& path) {
     std::istringstream fields(line);
     double t, tx, ty, tz, qx, qy, qz, qw;
     if (!(fields >> t >> tx >> ty >> tz >> qx >> qy >> qz >> qw)) {
-      throw core::Error(fmt::format("{}:{}: expected 'timestamp tx ty tz qx qy qz qw'",
-                                    path.string(), number));
+      throw core::Error(
+          fmt::format("{}:{}: expected 'timestamp tx ty tz qx qy qz qw'", path.string(), number));
     }
     trajectory[std::llround(t * 1e9)] =
         core::isometryFromTranslationQuaternion({tx, ty, tz}, qx, qy, qz, qw);
   }
   return trajectory;
+}
+
+void writeTumTrajectory(const Trajectory& trajectory, const std::filesystem::path& path) {
+  std::ofstream out(path);
+  out << "# timestamp tx ty tz qx qy qz qw\n";
+  for (const auto& [t, pose] : trajectory) {
+    const Eigen::Quaterniond q(pose.rotation());
+    const Eigen::Vector3d p = pose.translation();
+    out << fmt::format("{}.{:09d} {:.6f} {:.6f} {:.6f} {:.9f} {:.9f} {:.9f} {:.9f}\n",
+                       t / 1'000'000'000, t % 1'000'000'000, p.x(), p.y(), p.z(), q.x(), q.y(),
+                       q.z(), q.w());
+  }
+  out.close();
+  if (!out) throw core::Error(fmt::format("{}: cannot write the trajectory", path.string()));
 }
 
 std::optional<AteResult> absoluteTrajectoryError(const Trajectory& estimate,

@@ -26,7 +26,8 @@ TEST(Ate, IsZeroForTheTruthSeenFromAnotherFrame) {
   const Trajectory gt = groundTruth(100);
   // The same path expressed in a frame rotated and shifted: alignment removes it exactly.
   core::Isometry T_other_gt = core::Isometry::Identity();
-  T_other_gt.linear() = Eigen::AngleAxisd(0.7, Eigen::Vector3d(1, 2, 3).normalized()).toRotationMatrix();
+  T_other_gt.linear() =
+      Eigen::AngleAxisd(0.7, Eigen::Vector3d(1, 2, 3).normalized()).toRotationMatrix();
   T_other_gt.translation() = Eigen::Vector3d(5, -2, 1);
   Trajectory estimate;
   for (const auto& [t, pose] : gt) estimate[t + 3'000'000] = T_other_gt * pose;  // 3 ms late
@@ -82,6 +83,10 @@ TEST(EvaluateRun, FillsAteIntoTheReportAndNamesMissingFiles) {
   EXPECT_EQ(report["frames"], 3);
   EXPECT_NEAR(report["ate_m"].get<double>(), 0.0, 1e-9);
   EXPECT_TRUE(report["plane_recall"].is_null());
+  // The estimate aligned to the ground truth, in TUM format, reads back with the same poses.
+  const Trajectory aligned = readTumTrajectory(dir / "trajectory_aligned.txt");
+  ASSERT_EQ(aligned.size(), 3u);
+  EXPECT_NEAR(aligned.rbegin()->second.translation().y(), 0.1, 1e-6);
 
   try {
     evaluateRun(dir / "missing_run", dir / "gt.json");

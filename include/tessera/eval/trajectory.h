@@ -18,8 +18,11 @@ using Trajectory = std::map<std::int64_t, core::Isometry>;  // timestamp ns -> T
 // naming the file and line.
 Trajectory readTumTrajectory(const std::filesystem::path& path);
 
+// Writes TUM format (the inverse of readTumTrajectory). Throws core::Error naming the file.
+void writeTumTrajectory(const Trajectory& trajectory, const std::filesystem::path& path);
+
 struct AteResult {
-  std::size_t pairs = 0;   // poses matched by timestamp
+  std::size_t pairs = 0;  // poses matched by timestamp
   double rmse_m = 0.0;
   double max_m = 0.0;
   core::Isometry T_gt_est = core::Isometry::Identity();  // aligns the estimate to the truth
