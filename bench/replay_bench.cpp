@@ -13,10 +13,9 @@
 #include <CLI/CLI.hpp>
 #include <opencv2/core/utility.hpp>
 
+#include "bench_frames.h"
 #include "tessera/core/error.h"
 #include "tessera/core/log.h"
-#include "tessera/drivers/dataset_source.h"
-#include "tessera/drivers/oni/oni_source.h"
 #include "tessera/pipeline/flow_graph.h"
 #include "tessera/pipeline/run.h"
 
@@ -46,12 +45,7 @@ int main(int argc, char** argv) {
   app.add_option("--max-frames", max_frames, "Frames per run (0: all)");
   CLI11_PARSE(app, argc, argv);
 
-  if (source_path.empty()) {
-    const fs::path shared = fs::path(TESSERA_SOURCE_DIR) / "../shared/data/rgbd/tum_fr1_rpy_40";
-    source_path = fs::is_directory(shared)
-                      ? shared.lexically_normal().string()
-                      : (fs::path(TESSERA_SOURCE_DIR) / "recordings/tum_fr1_rpy_20.oni").string();
-  }
+  source_path = tessera::bench::resolvedSource(source_path);
   tessera::core::initLogging("warn");
   threads = threads > 0 ? threads : pipeline::defaultThreadCount();
   cv::setNumThreads(threads);
@@ -61,12 +55,7 @@ int main(int argc, char** argv) {
     std::map<std::string, std::vector<double>> stage_median_ms, stage_alone_fps;
     std::size_t frames = 0, tsdf_bytes = 0;
     for (int run = 0; run < repeat; ++run) {
-      std::unique_ptr<tessera::core::FrameSource> source;
-      if (fs::path(source_path).extension() == ".oni") {
-        source = std::make_unique<tessera::drivers::oni::OniSource>(source_path);
-      } else {
-        source = std::make_unique<tessera::drivers::DatasetSource>(source_path);
-      }
+      const auto source = tessera::bench::openSource(source_path);
       pipeline::RunOptions options;
       options.out_dir = fs::temp_directory_path() / "tessera_replay_bench";
       options.threads = threads;

@@ -64,6 +64,10 @@ int runCommand(const RunArguments& args) {
       spdlog::info("tracking: {} frames lost, {} restarts", summary.tracking_losses,
                    summary.tracking_restarts);
     }
+    if (summary.ate) {
+      spdlog::info("ATE against the recording's ground truth: {:.1f} mm RMSE over {} poses",
+                   summary.ate->rmse_m * 1e3, summary.ate->pairs);
+    }
     spdlog::info("TSDF {:.1f} MB, mesh {} vertices, peak RSS {:.0f} MB; wrote {}/",
                  static_cast<double>(summary.tsdf_bytes) / 1e6, summary.mesh_vertices,
                  summary.peak_rss_mb, args.out_dir);

@@ -1,3 +1,4 @@
+#include <cmath>
 #include "tessera/core/config.h"
 
 #include <optional>
@@ -127,6 +128,21 @@ void ConfigSection::read(std::string_view key, std::vector<double>& value) const
   if (const auto node = presentNode(*document_, path)) {
     value = numbersOf(*node, document_->origin, path);
   }
+}
+
+void ConfigSection::read(std::string_view key, std::vector<int>& value) const {
+  const std::string path = joinPath(path_, key);
+  const auto node = presentNode(*document_, path);
+  if (!node) return;
+  std::vector<int> integers;
+  for (const double number : numbersOf(*node, document_->origin, path)) {
+    if (number != std::floor(number)) {
+      throw ConfigError(
+          fmt::format("{}: key '{}' must be a list of integers", document_->origin, path));
+    }
+    integers.push_back(static_cast<int>(number));
+  }
+  value = std::move(integers);
 }
 
 void ConfigSection::read(std::string_view key, std::vector<std::vector<double>>& value) const {

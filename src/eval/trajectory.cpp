@@ -30,16 +30,18 @@ Trajectory readTumTrajectory(const std::filesystem::path& path) {
   return trajectory;
 }
 
+std::string tumLine(std::int64_t timestamp_ns, const core::Isometry& T_W_C) {
+  const Eigen::Quaterniond q(T_W_C.rotation());
+  const Eigen::Vector3d p = T_W_C.translation();
+  return fmt::format("{}.{:09d} {:.6f} {:.6f} {:.6f} {:.9f} {:.9f} {:.9f} {:.9f}\n",
+                     timestamp_ns / 1'000'000'000, timestamp_ns % 1'000'000'000, p.x(), p.y(),
+                     p.z(), q.x(), q.y(), q.z(), q.w());
+}
+
 void writeTumTrajectory(const Trajectory& trajectory, const std::filesystem::path& path) {
   std::ofstream out(path);
   out << "# timestamp tx ty tz qx qy qz qw\n";
-  for (const auto& [t, pose] : trajectory) {
-    const Eigen::Quaterniond q(pose.rotation());
-    const Eigen::Vector3d p = pose.translation();
-    out << fmt::format("{}.{:09d} {:.6f} {:.6f} {:.6f} {:.9f} {:.9f} {:.9f} {:.9f}\n",
-                       t / 1'000'000'000, t % 1'000'000'000, p.x(), p.y(), p.z(), q.x(), q.y(),
-                       q.z(), q.w());
-  }
+  for (const auto& [t, pose] : trajectory) out << tumLine(t, pose);
   out.close();
   if (!out) throw core::Error(fmt::format("{}: cannot write the trajectory", path.string()));
 }

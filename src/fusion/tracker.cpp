@@ -1,5 +1,6 @@
 #include "tessera/fusion/tracker.h"
 
+#include <algorithm>
 #include <cmath>
 
 #include <fmt/format.h>
@@ -19,18 +20,27 @@ void readConfig(const core::ConfigSection& section, TrackerConfig& config) {
   section.read("max_translation_m", config.max_translation_m);
   section.read("max_rotation_deg", config.max_rotation_deg);
   section.read("lost_frames_before_restart", config.lost_frames_before_restart);
+  section.read("iterations_per_level", config.iterations_per_level);
   if (config.max_depth_m <= config.min_depth_m || config.max_translation_m <= 0.0 ||
       config.max_rotation_deg <= 0.0 || config.lost_frames_before_restart < 1) {
     throw core::ConfigError(
         "tracker: need min_depth_m < max_depth_m, positive jump bounds and "
         "lost_frames_before_restart >= 1");
   }
+  const auto& levels = config.iterations_per_level;
+  if (levels.empty() || levels.size() > 6 ||
+      std::any_of(levels.begin(), levels.end(), [](int n) { return n < 1; })) {
+    throw core::ConfigError(
+        "tracker: iterations_per_level needs 1 to 6 levels of at least one iteration each");
+  }
 }
 
 struct Tracker::State {
   cv::Ptr<cv::rgbd::RgbdICPOdometry> odometry;
   cv::Mat camera_matrix;
-  cv::Mat previous_grey, previous_depth;  // the last well-tracked frame
+  // The last well-tracked frame with its pyramids, normals and gradients already built, so
+  // each frame's cache is computed once although it serves as destination, then as source.
+  cv::Ptr<cv::rgbd::OdometryFrame> previous;
   core::Isometry T_W_previous = core::Isometry::Identity();
   int lost_in_a_row = 0;
 };
@@ -51,29 +61,35 @@ TrackingResult Tracker::track(const core::Frame& frame, const core::Isometry& in
                                           static_cast<float>(config_.max_depth_difference_m));
     s.odometry->setMaxTranslation(config_.max_translation_m);
     s.odometry->setMaxRotation(config_.max_rotation_deg);
+    s.odometry->setIterationCounts(cv::Mat(config_.iterations_per_level, true));
+    // One gradient threshold per level (OpenCV's default value).
+    s.odometry->setMinGradientMagnitudes(
+        cv::Mat(std::vector<float>(config_.iterations_per_level.size(), 10.0f), true));
   }
   cv::Mat grey, depth;
   cv::cvtColor(core::registerColourToDepth(frame), grey, cv::COLOR_RGB2GRAY);
   frame.depth_mm.convertTo(depth, CV_32F, 1e-3);
   depth.setTo(std::numeric_limits<float>::quiet_NaN(), frame.depth_mm == 0);
+  cv::Ptr<cv::rgbd::OdometryFrame> current = cv::rgbd::OdometryFrame::create(grey, depth);
 
   TrackingResult result;
   const auto restart = [&](TrackingStatus status) {
-    s.previous_grey = grey;
-    s.previous_depth = depth;
+    s.odometry->prepareFrameCache(current, cv::rgbd::OdometryFrame::CACHE_ALL);
+    s.previous = current;
     s.T_W_previous = initial_T_W_C;
     s.lost_in_a_row = 0;
     result.status = status;
     result.T_W_C = initial_T_W_C;
     return result;
   };
-  if (s.previous_depth.empty()) return restart(TrackingStatus::kFirst);
+  if (!s.previous) return restart(TrackingStatus::kFirst);
 
   cv::Mat Rt;  // current_p = Rt * previous_p
   bool ok = false;
   try {
-    ok = s.odometry->compute(s.previous_grey, s.previous_depth, cv::Mat(), grey, depth, cv::Mat(),
-                             Rt);
+    // Prepared for both roles: as destination now, as source for the next frame.
+    s.odometry->prepareFrameCache(current, cv::rgbd::OdometryFrame::CACHE_ALL);
+    ok = s.odometry->compute(s.previous, current, Rt);
   } catch (const cv::Exception& e) {
     result.problem = fmt::format("odometry failed: {}", e.what());
   }
@@ -96,8 +112,7 @@ TrackingResult Tracker::track(const core::Frame& frame, const core::Isometry& in
   Eigen::Matrix4d T_current_previous;
   cv::cv2eigen(Rt, T_current_previous);
   const core::Isometry T_W_C = s.T_W_previous * core::Isometry(T_current_previous).inverse();
-  s.previous_grey = grey;
-  s.previous_depth = depth;
+  s.previous = current;
   s.T_W_previous = T_W_C;
   s.lost_in_a_row = 0;
   result.status = TrackingStatus::kTracked;

@@ -32,6 +32,8 @@ void readConfig(const core::ConfigSection& section, TsdfConfig& config) {
   section.read("min_depth_m", config.min_depth_m);
   section.read("max_depth_m", config.max_depth_m);
   section.read("block_resolution", config.block_resolution);
+  section.read("integration_scale", config.integration_scale);
+  section.read("release_distance_m", config.release_distance_m);
   if (config.voxel_size_m <= 0.0 || config.truncation_m < config.voxel_size_m) {
     throw core::ConfigError(
         "tsdf: voxel_size_m must be positive and truncation_m at least one voxel");
@@ -42,19 +44,26 @@ void readConfig(const core::ConfigSection& section, TsdfConfig& config) {
   if (config.block_resolution < 2) {
     throw core::ConfigError("tsdf: block_resolution must be at least 2");
   }
+  if (config.integration_scale < 1 || config.integration_scale > 8) {
+    throw core::ConfigError("tsdf: integration_scale must be between 1 and 8");
+  }
+  if (config.release_distance_m < 0.0) {
+    throw core::ConfigError("tsdf: release_distance_m must be 0 (keep all) or positive");
+  }
 }
 
 namespace {
 
-// Depth in metres as a float image, with depth outside [min, max] set to 0 (invalid).
-o3d::geometry::Image depthMetres(const cv::Mat& depth_mm, double min_m, double max_m) {
+// Depth in metres as a float image, taking every `step`-th pixel (no averaging, so depth
+// never mixes across an edge), with depth outside [min, max] set to 0 (invalid).
+o3d::geometry::Image depthMetres(const cv::Mat& depth_mm, int step, double min_m, double max_m) {
   o3d::geometry::Image image;
-  image.Prepare(depth_mm.cols, depth_mm.rows, 1, 4);
-  for (int v = 0; v < depth_mm.rows; ++v) {
-    const auto* src = depth_mm.ptr<std::uint16_t>(v);
+  image.Prepare(depth_mm.cols / step, depth_mm.rows / step, 1, 4);
+  for (int v = 0; v < image.height_; ++v) {
+    const auto* src = depth_mm.ptr<std::uint16_t>(v * step);
     auto* dst = image.PointerAt<float>(0, v);
-    for (int u = 0; u < depth_mm.cols; ++u) {
-      const double z = src[u] * 1e-3;
+    for (int u = 0; u < image.width_; ++u) {
+      const double z = src[u * step] * 1e-3;
       dst[u] = (z >= min_m && z <= max_m) ? static_cast<float>(z) : 0.0f;
     }
   }
@@ -95,10 +104,14 @@ void TsdfMap::integrate(const core::Frame& frame, const core::Isometry& T_W_C) {
   }
   if (thread_cap_ > 0) omp_set_num_threads(thread_cap_);
 
+  const int step = config_.integration_scale;
   o3d::geometry::RGBDImage rgbd;
-  rgbd.depth_ = depthMetres(frame.depth_mm, config_.min_depth_m, config_.max_depth_m);
-  rgbd.color_ = colourImage(frame.rgb, k.width, k.height);
-  const o3d::camera::PinholeCameraIntrinsic intrinsic(k.width, k.height, k.fx, k.fy, k.cx, k.cy);
+  rgbd.depth_ = depthMetres(frame.depth_mm, step, config_.min_depth_m, config_.max_depth_m);
+  rgbd.color_ = colourImage(frame.rgb, rgbd.depth_.width_, rgbd.depth_.height_);
+  // Pixel u of the subsampled image is pixel step*u of the original: f and c scale by 1/step.
+  const o3d::camera::PinholeCameraIntrinsic intrinsic(rgbd.depth_.width_, rgbd.depth_.height_,
+                                                      k.fx / step, k.fy / step, k.cx / step,
+                                                      k.cy / step);
   // Open3D takes the extrinsic as world-to-camera.
   const Eigen::Matrix4d T_C_W = T_W_C.inverse().matrix();
   volume_->tsdf.Integrate(rgbd, intrinsic, T_C_W);
@@ -111,6 +124,23 @@ SurfaceMesh TsdfMap::extractMesh() const {
   out.colors = mesh->vertex_colors_;
   out.triangles = mesh->triangles_;
   return out;
+}
+
+std::size_t TsdfMap::releaseBlocksFartherThan(const Eigen::Vector3d& camera_position,
+                                              double distance_m) {
+  auto& units = volume_->tsdf.volume_units_;
+  const double block_m = config_.voxel_size_m * config_.block_resolution;
+  std::size_t released = 0;
+  for (auto it = units.begin(); it != units.end();) {
+    const Eigen::Vector3d centre = (it->first.cast<double>() + Eigen::Vector3d::Constant(0.5)) * block_m;
+    if ((centre - camera_position).norm() > distance_m) {
+      it = units.erase(it);
+      ++released;
+    } else {
+      ++it;
+    }
+  }
+  return released;
 }
 
 std::size_t TsdfMap::blockCount() const { return volume_->tsdf.volume_units_.size(); }

@@ -14,7 +14,8 @@ int defaultThreadCount() {
   return hardware == 0 ? 1 : static_cast<int>(hardware);
 }
 
-void runGraph(SourceStage& source, FusionStage& fusion, StatsSink& sink,
+void runGraph(SourceStage& source, TrackingStage& tracking, IntegrationStage& integration,
+              StatsSink& sink,
               const GraphOptions& options) {
   const int threads = options.threads > 0 ? options.threads : defaultThreadCount();
   oneapi::tbb::task_arena arena(threads);
@@ -32,8 +33,12 @@ void runGraph(SourceStage& source, FusionStage& fusion, StatsSink& sink,
     // Replay: never drop a frame; hold the source back instead.
     flow::limiter_node<core::Frame> limiter(graph,
                                             static_cast<std::size_t>(options.max_frames_in_flight));
-    flow::function_node<core::Frame, FusedFrame> fusion_node(
-        graph, flow::serial, [&](core::Frame frame) { return fusion.process(std::move(frame)); });
+    // Two serial stages in a row: while frame N is integrated, frame N+1 is tracked.
+    flow::function_node<core::Frame, TrackedFrame> tracking_node(
+        graph, flow::serial, [&](core::Frame frame) { return tracking.process(std::move(frame)); });
+    flow::function_node<TrackedFrame, FusedFrame> integration_node(
+        graph, flow::serial,
+        [&](TrackedFrame tracked) { return integration.process(std::move(tracked)); });
     flow::function_node<FusedFrame, flow::continue_msg> sink_node(graph, flow::serial,
                                                                   [&](const FusedFrame& fused) {
                                                                     sink.process(fused);
@@ -41,15 +46,15 @@ void runGraph(SourceStage& source, FusionStage& fusion, StatsSink& sink,
                                                                   });
 
     flow::make_edge(source_node, limiter);
-    flow::make_edge(limiter, fusion_node);
-    flow::make_edge(fusion_node, sink_node);
+    flow::make_edge(limiter, tracking_node);
+    flow::make_edge(tracking_node, integration_node);
+    flow::make_edge(integration_node, sink_node);
     flow::make_edge(sink_node, limiter.decrementer());
 
     source_node.activate();
     graph.wait_for_all();
   });
   // End of stream: flush in topological order.
-  fusion.flush();
   sink.flush();
 }
 

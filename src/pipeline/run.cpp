@@ -46,11 +46,13 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
   if (total && options.max_frames) total = std::min(*total, *options.max_frames);
 
   SourceStage source_stage(source, options.max_frames);
-  FusionStage fusion_stage(config.tsdf, config.tracker, options.poses, threads);
+  TrackingStage tracking_stage(config.tracker, options.poses);
+  IntegrationStage integration_stage(config.tsdf, threads);
   StatsSink sink(options.out_dir, total, options.on_progress);
 
   const auto start = std::chrono::steady_clock::now();
-  runGraph(source_stage, fusion_stage, sink, {threads, config.pipeline.max_frames_in_flight});
+  runGraph(source_stage, tracking_stage, integration_stage, sink,
+           {threads, config.pipeline.max_frames_in_flight});
   const double wall_s =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 
@@ -58,20 +60,24 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
   summary.source = source.name();
   summary.frames = sink.framesDone();
   summary.frames_bad = source_stage.badFrames();
-  summary.frames_integrated = fusion_stage.framesIntegrated();
-  summary.frames_without_pose = fusion_stage.framesSkipped();
+  summary.frames_integrated = integration_stage.framesIntegrated();
+  summary.frames_without_pose = integration_stage.framesSkipped();
   summary.poses = options.poses == PoseSource::kTrack ? "track" : "gt";
-  summary.tracking_losses = fusion_stage.trackingLosses();
-  summary.tracking_restarts = fusion_stage.trackingRestarts();
+  summary.tracking_losses = tracking_stage.trackingLosses();
+  summary.tracking_restarts = tracking_stage.trackingRestarts();
   summary.source_end_problem = source_stage.endProblem();
   summary.wall_s = wall_s;
   summary.fps = wall_s > 0.0 ? static_cast<double>(summary.frames) / wall_s : 0.0;
-  summary.tsdf_bytes = fusion_stage.map().memoryBytes();
+  summary.ate = eval::absoluteTrajectoryError(sink.estimate(), sink.groundTruth());
+  summary.tsdf_bytes = integration_stage.map().memoryBytes();
+  summary.tsdf_blocks_released = integration_stage.blocksReleased();
   summary.stages = {figures("source", source_stage.timer()),
-                    figures("fusion", fusion_stage.timer()), figures("sink", sink.timer())};
+                    figures("tracking", tracking_stage.timer()),
+                    figures("integration", integration_stage.timer()),
+                    figures("sink", sink.timer())};
 
   // Export: the mesh is written even when the source ended abnormally, so work is kept.
-  const auto mesh = fusion_stage.map().extractMesh();
+  const auto mesh = integration_stage.map().extractMesh();
   summary.mesh_vertices = mesh.vertices.size();
   fusion::writePly(mesh, options.out_dir / "mesh.ply");
   summary.peak_rss_mb = peakRssMb();
@@ -95,8 +101,12 @@ void writeReport(const RunSummary& summary, const std::filesystem::path& path) {
       {"fps", summary.fps},
       {"peak_rss_mb", summary.peak_rss_mb},
       {"tsdf_bytes", summary.tsdf_bytes},
+      {"tsdf_blocks_released", summary.tsdf_blocks_released},
       {"mesh_vertices", summary.mesh_vertices},
   };
+  report["ate_m"] = summary.ate ? json(summary.ate->rmse_m) : json(nullptr);
+  report["ate_max_m"] = summary.ate ? json(summary.ate->max_m) : json(nullptr);
+  report["ate_pairs"] = summary.ate ? summary.ate->pairs : 0;
   report["source_end_problem"] =
       summary.source_end_problem.empty() ? json(nullptr) : json(summary.source_end_problem);
   // Figures of stages that do not exist yet: null, never a made-up value.
@@ -114,7 +124,6 @@ void writeReport(const RunSummary& summary, const std::filesystem::path& path) {
                           "ccv_rejection",
                           "commit_latency_ms_p50",
                           "commit_latency_ms_p95",
-                          "ate_m",
                           "plane_recall",
                           "plane_precision",
                           "false_match_rate",

@@ -6,6 +6,7 @@
 
 #include "tessera/core/error.h"
 #include "tessera/core/registration.h"
+#include "tessera/eval/trajectory.h"
 
 namespace tessera::pipeline {
 
@@ -38,13 +39,11 @@ std::optional<core::Frame> SourceStage::next() {
   return std::nullopt;
 }
 
-FusionStage::FusionStage(const fusion::TsdfConfig& tsdf, const fusion::TrackerConfig& tracker,
-                         PoseSource poses, int thread_cap)
-    : map_(tsdf), tracker_(tracker), poses_(poses) {
-  map_.setThreadCap(thread_cap);
-}
+TrackingStage::TrackingStage(const fusion::TrackerConfig& tracker, PoseSource poses)
+    : tracker_(tracker), poses_(poses) {}
 
-std::optional<core::Isometry> FusionStage::poseOf(const core::Frame& frame, std::string& problem) {
+std::optional<core::Isometry> TrackingStage::poseOf(const core::Frame& frame,
+                                                    std::string& problem) {
   if (poses_ == PoseSource::kGroundTruth) {
     if (!frame.T_W_C_gt) problem = "no ground-truth pose (--poses gt)";
     return frame.T_W_C_gt;
@@ -66,16 +65,45 @@ std::optional<core::Isometry> FusionStage::poseOf(const core::Frame& frame, std:
   return tracked.T_W_C;
 }
 
-FusedFrame FusionStage::process(core::Frame frame) {
-  FusedFrame fused;
+TrackedFrame TrackingStage::process(core::Frame frame) {
+  TrackedFrame tracked;
   {
     ScopedStageTime time(timer_);
     try {
       if (frame.colour_camera) frame = core::withRegisteredColour(std::move(frame));
-      fused.T_W_C = poseOf(frame, fused.skip_reason);
+      tracked.T_W_C = poseOf(frame, tracked.skip_reason);
+    } catch (const core::Error& e) {
+      tracked.T_W_C.reset();
+      tracked.skip_reason = e.what();
+      spdlog::warn("tracking skipped {}", e.what());
+    }
+  }
+  tracked.tracking_ms = timer_.lastMs();
+  tracked.frame = std::move(frame);
+  return tracked;
+}
+
+IntegrationStage::IntegrationStage(const fusion::TsdfConfig& tsdf, int thread_cap)
+    : map_(tsdf), release_distance_m_(tsdf.release_distance_m) {
+  map_.setThreadCap(thread_cap);
+}
+
+FusedFrame IntegrationStage::process(TrackedFrame tracked) {
+  FusedFrame fused;
+  fused.T_W_C = tracked.T_W_C;
+  fused.skip_reason = std::move(tracked.skip_reason);
+  fused.tracking_ms = tracked.tracking_ms;
+  {
+    ScopedStageTime time(timer_);
+    try {
       if (fused.T_W_C) {
-        map_.integrate(frame, *fused.T_W_C);
+        map_.integrate(tracked.frame, *fused.T_W_C);
         fused.integrated = true;
+        if (release_distance_m_ > 0.0) {
+          fused.tsdf_blocks_released =
+              map_.releaseBlocksFartherThan(fused.T_W_C->translation(), release_distance_m_);
+          blocks_released_ += fused.tsdf_blocks_released;
+        }
       }
     } catch (const core::Error& e) {
       fused.T_W_C.reset();
@@ -83,10 +111,10 @@ FusedFrame FusionStage::process(core::Frame frame) {
       spdlog::warn("fusion skipped {}", e.what());
     }
   }
-  fused.fusion_ms = timer_.lastMs();
+  fused.integration_ms = timer_.lastMs();
   (fused.integrated ? integrated_ : skipped_)++;
   fused.tsdf_bytes = map_.memoryBytes();
-  fused.frame = std::move(frame);
+  fused.frame = std::move(tracked.frame);
   return fused;
 }
 
@@ -109,6 +137,8 @@ StatsSink::StatsSink(const std::filesystem::path& out_dir, std::optional<std::si
 void StatsSink::process(const FusedFrame& fused) {
   ScopedStageTime time(timer_);
   ++frames_done_;
+  if (fused.T_W_C) estimate_[fused.frame.timestamp_ns] = *fused.T_W_C;
+  if (fused.frame.T_W_C_gt) ground_truth_[fused.frame.timestamp_ns] = *fused.frame.T_W_C_gt;
   map_bytes_ = fused.tsdf_bytes;  // textures join the map size in later stages
   const double elapsed_s =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
@@ -119,21 +149,16 @@ void StatsSink::process(const FusedFrame& fused) {
                            {"timestamp_ns", fused.frame.timestamp_ns},
                            {"elapsed_s", elapsed_s},
                            {"integrated", fused.integrated},
-                           {"fusion_ms", fused.fusion_ms},
+                           {"tracking_ms", fused.tracking_ms},
+                           {"integration_ms", fused.integration_ms},
                            {"tsdf_bytes", fused.tsdf_bytes},
+                           {"tsdf_blocks_released", fused.tsdf_blocks_released},
                            {"map_bytes", map_bytes_},
                            {"patches_finalized", 0},
                            {"textures_stored", 0}};
     if (!fused.integrated) line["skip_reason"] = fused.skip_reason;
     stats_ << line.dump() << '\n';
-    if (fused.T_W_C) {
-      const Eigen::Quaterniond q(fused.T_W_C->rotation());
-      const Eigen::Vector3d t = fused.T_W_C->translation();
-      trajectory_ << fmt::format("{}.{:09d} {:.6f} {:.6f} {:.6f} {:.9f} {:.9f} {:.9f} {:.9f}\n",
-                                 fused.frame.timestamp_ns / 1'000'000'000,
-                                 fused.frame.timestamp_ns % 1'000'000'000, t.x(), t.y(), t.z(),
-                                 q.x(), q.y(), q.z(), q.w());
-    }
+    if (fused.T_W_C) trajectory_ << eval::tumLine(fused.frame.timestamp_ns, *fused.T_W_C);
     if (!stats_ || !trajectory_) {
       write_failed_ = true;
       spdlog::error("{}: writing failed (disk full?); no further stats lines",

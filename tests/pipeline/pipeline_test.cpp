@@ -136,7 +136,7 @@ TEST(Pipeline, RunsEveryGoodFrameAndWritesTheOutputs) {
   EXPECT_EQ(report["frames_bad"], 1);
   EXPECT_TRUE(report["compression"].is_null());
   EXPECT_GT(report["peak_rss_mb"].get<double>(), 0.0);
-  EXPECT_EQ(report["stages"]["fusion"]["calls"], 7);
+  EXPECT_EQ(report["stages"]["integration"]["calls"], 7);
 }
 
 TEST(Pipeline, ResultDoesNotDependOnThreadCount) {
@@ -199,6 +199,9 @@ TEST(RunConfig, DefaultYamlDocumentsEveryKeyWithTheStructDefaults) {
   EXPECT_EQ(from_file.tsdf.min_depth_m, defaults.tsdf.min_depth_m);
   EXPECT_EQ(from_file.tsdf.max_depth_m, defaults.tsdf.max_depth_m);
   EXPECT_EQ(from_file.tsdf.block_resolution, defaults.tsdf.block_resolution);
+  EXPECT_EQ(from_file.tsdf.integration_scale, defaults.tsdf.integration_scale);
+  EXPECT_EQ(from_file.tsdf.release_distance_m, defaults.tsdf.release_distance_m);
+  EXPECT_EQ(from_file.tracker.iterations_per_level, defaults.tracker.iterations_per_level);
   EXPECT_EQ(from_file.tracker.max_translation_m, defaults.tracker.max_translation_m);
   EXPECT_EQ(from_file.tracker.max_rotation_deg, defaults.tracker.max_rotation_deg);
   EXPECT_EQ(from_file.tracker.max_depth_difference_m, defaults.tracker.max_depth_difference_m);

@@ -26,6 +26,7 @@ class ConfigSection {
   void read(std::string_view key, std::string& value) const;
   // A list of numbers, e.g. `position: [1.0, 2.0, 0.5]`.
   void read(std::string_view key, std::vector<double>& value) const;
+  void read(std::string_view key, std::vector<int>& value) const;
   // A list of lists of numbers, e.g. a polygon `[[0, 0], [4, 0], [4, 2.6]]`.
   void read(std::string_view key, std::vector<std::vector<double>>& value) const;
 

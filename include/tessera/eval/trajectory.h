@@ -7,6 +7,7 @@
 #include <filesystem>
 #include <map>
 #include <optional>
+#include <string>
 
 #include "tessera/core/pose.h"
 
@@ -17,6 +18,9 @@ using Trajectory = std::map<std::int64_t, core::Isometry>;  // timestamp ns -> T
 // TUM format: "timestamp tx ty tz qx qy qz qw" per line, '#' comments. Throws core::Error
 // naming the file and line.
 Trajectory readTumTrajectory(const std::filesystem::path& path);
+
+// One TUM-format line (with its newline) for the pose at `timestamp_ns`.
+std::string tumLine(std::int64_t timestamp_ns, const core::Isometry& T_W_C);
 
 // Writes TUM format (the inverse of readTumTrajectory). Throws core::Error naming the file.
 void writeTumTrajectory(const Trajectory& trajectory, const std::filesystem::path& path);

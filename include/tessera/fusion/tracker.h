@@ -3,6 +3,7 @@
 // point-to-plane ICP terms over a coarse-to-fine pyramid), with tracking-loss detection.
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "tessera/core/config.h"
 #include "tessera/core/frame.h"
@@ -16,6 +17,8 @@ struct TrackerConfig {
   double max_translation_m = 0.15;       // per frame; a larger jump is a tracking loss
   double max_rotation_deg = 15.0;        // per frame; a larger turn is a tracking loss
   int lost_frames_before_restart = 10;   // then tracking restarts from the current frame
+  // Gauss-Newton iterations per pyramid level, finest level first; the level count follows.
+  std::vector<int> iterations_per_level = {3, 3, 4, 6};
 };
 
 void readConfig(const core::ConfigSection& section, TrackerConfig& config);

@@ -15,11 +15,20 @@
 namespace tessera::fusion {
 
 struct TsdfConfig {
-  double voxel_size_m = 0.01;  // edge of one voxel
-  double truncation_m = 0.04;  // TSDF truncation distance (a few voxels)
+  // 2 cm: the TSDF is geometry only (textures come from the raw colour frames), and 1 cm cost
+  // 4x the integration time and memory (docs/ARCHITECTURE.md has the measurements).
+  double voxel_size_m = 0.02;  // edge of one voxel
+  double truncation_m = 0.06;  // TSDF truncation distance (a few voxels)
   double min_depth_m = 0.3;    // depth below this is ignored (Kinect v1 minimum ~0.4 m)
   double max_depth_m = 4.0;    // depth beyond this is ignored (noise grows with z^2)
   int block_resolution = 16;   // voxels per edge of one allocated block
+  // Depth is integrated at 1/integration_scale of its resolution (every n-th pixel): the TSDF
+  // is geometry only, and its cost grows with the pixels cast. Colour for texturing is taken
+  // from the full-resolution frames by later stages, never from voxels.
+  int integration_scale = 2;
+  // Blocks farther than this from the camera are released after each frame (0: keep all), so
+  // memory stays bounded on long runs. Later stages finalize the planes there first.
+  double release_distance_m = 0.0;
 };
 
 // Reads the `tsdf:` keys of a config section into `config`.
@@ -49,6 +58,10 @@ class TsdfMap {
 
   // Zero-crossing surface by marching cubes.
   SurfaceMesh extractMesh() const;
+
+  // Frees the blocks whose centre is farther than distance_m from `camera_position`; returns
+  // how many were freed.
+  std::size_t releaseBlocksFartherThan(const Eigen::Vector3d& camera_position, double distance_m);
 
   // Bytes held by allocated voxel blocks.
   std::size_t memoryBytes() const;

@@ -1,5 +1,6 @@
 #pragma once
-// The one place that knows the topology: source -> limiter -> fusion -> stats sink, as a
+// The one place that knows the topology: source -> limiter -> tracking -> integration ->
+// stats sink, as a
 // tbb::flow::graph inside a task_arena of the requested concurrency.
 #include "tessera/pipeline/stages.h"
 
@@ -12,7 +13,8 @@ struct GraphOptions {
 
 // Runs the stages over the whole stream, then flushes them in order (end of stream).
 // Blocks until done.
-void runGraph(SourceStage& source, FusionStage& fusion, StatsSink& sink,
+void runGraph(SourceStage& source, TrackingStage& tracking, IntegrationStage& integration,
+              StatsSink& sink,
               const GraphOptions& options);
 
 // Hardware threads, at least 1.

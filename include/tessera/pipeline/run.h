@@ -6,6 +6,7 @@
 #include <string>
 
 #include "tessera/core/frame_source.h"
+#include "tessera/eval/trajectory.h"
 #include "tessera/pipeline/run_config.h"
 #include "tessera/pipeline/stages.h"
 
@@ -41,7 +42,10 @@ struct RunSummary {
   double fps = 0.0;
   double peak_rss_mb = 0.0;
   std::size_t tsdf_bytes = 0;
+  std::size_t tsdf_blocks_released = 0;  // far behind the camera (tsdf.release_distance_m)
   std::size_t mesh_vertices = 0;
+  // ATE of the fused poses against the recording's ground truth, when it has one.
+  std::optional<eval::AteResult> ate;
   std::vector<StageFigures> stages;
 };
 

@@ -11,6 +11,7 @@
 #include <string>
 
 #include "tessera/core/frame_source.h"
+#include "tessera/eval/trajectory.h"
 #include "tessera/fusion/tracker.h"
 #include "tessera/fusion/tsdf_map.h"
 #include "tessera/pipeline/stage_timer.h"
@@ -40,6 +41,20 @@ class SourceStage {
   StageTimer timer_;
 };
 
+// Where fusion takes camera poses from.
+enum class PoseSource {
+  kTrack,        // estimated by the tracker (the first frame starts at its ground truth, if any)
+  kGroundTruth,  // the recording's ground truth; frames without one are not integrated
+};
+
+// A frame with the pose it will be fused at, or why it has none.
+struct TrackedFrame {
+  core::Frame frame;                    // colour registered to depth
+  std::optional<core::Isometry> T_W_C;  // nothing: do not integrate
+  std::string skip_reason;
+  double tracking_ms = 0.0;
+};
+
 // A frame after fusion, with what the sink reports about it.
 struct FusedFrame {
   core::Frame frame;
@@ -47,28 +62,19 @@ struct FusedFrame {
   std::optional<core::Isometry> T_W_C;  // the pose it was fused at
   std::string skip_reason;              // why the frame was not integrated
   std::size_t tsdf_bytes = 0;
-  double fusion_ms = 0.0;
+  std::size_t tsdf_blocks_released = 0;  // this frame, far behind the camera
+  double tracking_ms = 0.0;
+  double integration_ms = 0.0;
 };
 
-// Where fusion takes camera poses from.
-enum class PoseSource {
-  kTrack,        // estimated by the tracker (the first frame starts at its ground truth, if any)
-  kGroundTruth,  // the recording's ground truth; frames without one are not integrated
-};
-
-// Tracks each frame (or takes its ground-truth pose) and integrates it into the TSDF. A frame
-// whose tracking is lost is counted and not integrated, so it cannot corrupt the map.
-class FusionStage {
+// Registers colour to depth and gives each frame its pose: tracked, or the ground truth. A
+// frame whose tracking is lost gets no pose, so it cannot corrupt the map.
+class TrackingStage {
  public:
-  FusionStage(const fusion::TsdfConfig& tsdf, const fusion::TrackerConfig& tracker,
-              PoseSource poses, int thread_cap);
+  TrackingStage(const fusion::TrackerConfig& tracker, PoseSource poses);
 
-  FusedFrame process(core::Frame frame);
-  void flush() {}
+  TrackedFrame process(core::Frame frame);
 
-  const fusion::TsdfMap& map() const { return map_; }
-  std::size_t framesIntegrated() const { return integrated_; }
-  std::size_t framesSkipped() const { return skipped_; }
   std::size_t trackingLosses() const { return tracking_losses_; }
   std::size_t trackingRestarts() const { return tracking_restarts_; }
   const StageTimer& timer() const { return timer_; }
@@ -76,13 +82,33 @@ class FusionStage {
  private:
   std::optional<core::Isometry> poseOf(const core::Frame& frame, std::string& problem);
 
-  fusion::TsdfMap map_;
   fusion::Tracker tracker_;
   PoseSource poses_;
-  std::size_t integrated_ = 0;
-  std::size_t skipped_ = 0;
   std::size_t tracking_losses_ = 0;
   std::size_t tracking_restarts_ = 0;
+  StageTimer timer_;
+};
+
+// Integrates posed frames into the TSDF and releases blocks the camera has left far behind.
+// Runs beside the tracking stage: frame N is integrated while frame N+1 is tracked.
+class IntegrationStage {
+ public:
+  IntegrationStage(const fusion::TsdfConfig& tsdf, int thread_cap);
+
+  FusedFrame process(TrackedFrame tracked);
+
+  const fusion::TsdfMap& map() const { return map_; }
+  std::size_t framesIntegrated() const { return integrated_; }
+  std::size_t framesSkipped() const { return skipped_; }
+  std::size_t blocksReleased() const { return blocks_released_; }
+  const StageTimer& timer() const { return timer_; }
+
+ private:
+  fusion::TsdfMap map_;
+  double release_distance_m_;
+  std::size_t integrated_ = 0;
+  std::size_t skipped_ = 0;
+  std::size_t blocks_released_ = 0;
   StageTimer timer_;
 };
 
@@ -111,6 +137,9 @@ class StatsSink {
 
   std::size_t framesDone() const { return frames_done_; }
   std::size_t mapBytes() const { return map_bytes_; }
+  // The poses frames were fused at, and the recording's ground truth for the same frames.
+  const eval::Trajectory& estimate() const { return estimate_; }
+  const eval::Trajectory& groundTruth() const { return ground_truth_; }
   const StageTimer& timer() const { return timer_; }
 
  private:
@@ -123,6 +152,8 @@ class StatsSink {
   std::chrono::steady_clock::time_point start_;
   std::size_t frames_done_ = 0;
   std::size_t map_bytes_ = 0;
+  eval::Trajectory estimate_;
+  eval::Trajectory ground_truth_;
   bool write_failed_ = false;
   StageTimer timer_;
 };

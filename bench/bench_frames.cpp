@@ -1,0 +1,50 @@
+#include "bench_frames.h"
+
+#include <filesystem>
+
+#include <fmt/format.h>
+
+#include "tessera/core/error.h"
+#include "tessera/core/registration.h"
+#include "tessera/drivers/dataset_source.h"
+#include "tessera/drivers/oni/oni_source.h"
+
+namespace tessera::bench {
+
+namespace fs = std::filesystem;
+
+std::string resolvedSource(const std::string& path) {
+  if (!path.empty()) return path;
+  const fs::path shared = fs::path(TESSERA_SOURCE_DIR) / "../shared/data/rgbd/tum_fr1_rpy_40";
+  return fs::is_directory(shared)
+             ? shared.lexically_normal().string()
+             : (fs::path(TESSERA_SOURCE_DIR) / "recordings/tum_fr1_rpy_20.oni").string();
+}
+
+std::unique_ptr<core::FrameSource> openSource(const std::string& path) {
+  const std::string resolved = resolvedSource(path);
+  if (fs::path(resolved).extension() == ".oni") {
+    return std::make_unique<drivers::oni::OniSource>(resolved);
+  }
+  return std::make_unique<drivers::DatasetSource>(resolved);
+}
+
+std::vector<core::Frame> loadFrames(const std::string& path, std::size_t max_frames,
+                                    bool need_truth) {
+  const auto source = openSource(path);
+  std::vector<core::Frame> frames;
+  while (max_frames == 0 || frames.size() < max_frames) {
+    core::ReadResult result = source->read();
+    if (result.status == core::ReadStatus::kEndOfData) break;
+    if (result.status == core::ReadStatus::kBadFrame) continue;
+    if (need_truth && !result.frame.T_W_C_gt) {
+      throw core::Error(
+          fmt::format("{}: frame {} has no ground-truth pose", source->name(), result.frame.index));
+    }
+    frames.push_back(core::withRegisteredColour(std::move(result.frame)));
+  }
+  if (frames.empty()) throw core::Error(fmt::format("{}: no frames", source->name()));
+  return frames;
+}
+
+}  // namespace tessera::bench

@@ -1,0 +1,25 @@
+#pragma once
+// What the benchmarks share: the default recording to measure and frames held in memory.
+#include <cstddef>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "tessera/core/frame.h"
+#include "tessera/core/frame_source.h"
+
+namespace tessera::bench {
+
+// `path`, or when empty ../shared/data/rgbd/tum_fr1_rpy_40 if present, else the committed
+// recordings/tum_fr1_rpy_20.oni.
+std::string resolvedSource(const std::string& path);
+
+// A dataset folder or an .oni recording.
+std::unique_ptr<core::FrameSource> openSource(const std::string& path);
+
+// Reads up to max_frames good frames (0: all), colour registered to depth. With need_truth,
+// throws core::Error when a frame has no ground-truth pose.
+std::vector<core::Frame> loadFrames(const std::string& path, std::size_t max_frames,
+                                    bool need_truth);
+
+}  // namespace tessera::bench
