@@ -47,4 +47,12 @@ std::vector<core::Frame> loadFrames(const std::string& path, std::size_t max_fra
   return frames;
 }
 
+core::ReadResult MemorySource::read() {
+  core::ReadResult result;
+  if (next_ == frames_.size()) return result;  // kEndOfData
+  result.status = core::ReadStatus::kFrame;
+  result.frame = frames_[next_++];  // cv::Mat copies share pixels: cheap
+  return result;
+}
+
 }  // namespace tessera::bench

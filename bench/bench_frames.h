@@ -22,4 +22,19 @@ std::unique_ptr<core::FrameSource> openSource(const std::string& path);
 std::vector<core::Frame> loadFrames(const std::string& path, std::size_t max_frames,
                                     bool need_truth);
 
+// Replays frames held in memory, so that a measurement does not include decoding.
+class MemorySource : public core::FrameSource {
+ public:
+  MemorySource(const std::vector<core::Frame>& frames, std::string name)
+      : frames_(frames), name_(std::move(name)) {}
+  core::ReadResult read() override;
+  std::string name() const override { return name_; }
+  std::optional<std::size_t> frameCount() const override { return frames_.size(); }
+
+ private:
+  const std::vector<core::Frame>& frames_;
+  std::string name_;
+  std::size_t next_ = 0;
+};
+
 }  // namespace tessera::bench
