@@ -16,7 +16,6 @@
 
 #include <fmt/format.h>
 #include <omp.h>
-#include <CLI/CLI.hpp>
 #include <open3d/camera/PinholeCameraIntrinsic.h>
 #include <open3d/core/EigenConverter.h>
 #include <open3d/geometry/Image.h>
@@ -27,6 +26,7 @@
 #include <open3d/t/geometry/Utility.h>
 #include <open3d/t/geometry/VoxelBlockGrid.h>
 #include <open3d/utility/Logging.h>
+#include <CLI/CLI.hpp>
 #include <opencv2/core/eigen.hpp>
 #include <opencv2/core/utility.hpp>
 #include <opencv2/imgproc.hpp>
@@ -34,9 +34,9 @@
 
 #include "bench_frames.h"
 #include "tessera/core/log.h"
+#include "tessera/eval/trajectory.h"
 #include "tessera/fusion/tsdf_map.h"
 #include "tessera/pipeline/run.h"
-#include "tessera/eval/trajectory.h"
 
 namespace {
 
@@ -201,8 +201,9 @@ int odometry_failures = 0;  // reset per option; failures keep the previous pose
 
 // The pose of `current` from the odometry that maps `reference` points (seen from
 // T_W_reference) into `current`; nothing when the odometry fails.
-std::optional<Isometry> odometryStep(cv::rgbd::RgbdICPOdometry& odometry, const OdometryImages& reference,
-                      const OdometryImages& current, const Isometry& T_W_reference) {
+std::optional<Isometry> odometryStep(cv::rgbd::RgbdICPOdometry& odometry,
+                                     const OdometryImages& reference, const OdometryImages& current,
+                                     const Isometry& T_W_reference) {
   cv::Mat Rt;
   if (!odometry.compute(reference.grey, reference.depth, cv::Mat(), current.grey, current.depth,
                         cv::Mat(), Rt)) {
@@ -236,9 +237,9 @@ Timing frameToModel(const std::vector<Frame>& frames, int factor) {
     if (!odometry) odometry = makeOdometry(f);
     if (blocks.NumElements() > 0) {
       const auto raycast_start = Clock::now();
-      auto view = grid.RayCast(blocks, tensorIntrinsics(f), tensorPose(T_W_C.inverse()), f.width,
-                               f.height, {"depth", "color"}, 1000.0f, 0.3f, 4.0f, 1.0f,
-                               kTruncVoxels);
+      auto view =
+          grid.RayCast(blocks, tensorIntrinsics(f), tensorPose(T_W_C.inverse()), f.width, f.height,
+                       {"depth", "color"}, 1000.0f, 0.3f, 4.0f, 1.0f, kTruncVoxels);
       raycast_ms += msSince(raycast_start);
       OdometryImages model;
       model.depth = matOf(view["depth"], CV_32FC1) * 1e-3;
@@ -304,8 +305,7 @@ Timing plainOpen3dLoop(const std::vector<Frame>& frames, const tessera::fusion::
   const auto start = Clock::now();
   for (const Frame& frame : frames) {
     const auto& k = frame.intrinsics;
-    const o3d::camera::PinholeCameraIntrinsic intrinsic(k.width, k.height, k.fx, k.fy, k.cx,
-                                                        k.cy);
+    const o3d::camera::PinholeCameraIntrinsic intrinsic(k.width, k.height, k.fx, k.fy, k.cx, k.cy);
     const auto colour = legacyImage(frame.rgb);
     const auto depth = legacyImage(frame.depth_mm);
     auto grey = o3d::geometry::RGBDImage::CreateFromColorAndDepth(colour, depth, 1000.0, 4.0);
@@ -314,8 +314,8 @@ Timing plainOpen3dLoop(const std::vector<Frame>& frames, const tessera::fusion::
           o3d::pipelines::odometry::ComputeRGBDOdometry(*grey, *previous, intrinsic);
       if (ok) T_W_C = T_W_C * Isometry(T_previous_current);
     }
-    const auto rgb = o3d::geometry::RGBDImage::CreateFromColorAndDepth(colour, depth, 1000.0, 4.0,
-                                                                       false);
+    const auto rgb =
+        o3d::geometry::RGBDImage::CreateFromColorAndDepth(colour, depth, 1000.0, 4.0, false);
     volume.Integrate(*rgb, intrinsic, T_W_C.inverse().matrix());
     previous = grey;
     estimate[frame.timestamp_ns] = T_W_C;
@@ -331,8 +331,8 @@ Timing tesseraPipeline(const std::vector<Frame>& frames, int threads) {
   tessera::pipeline::RunOptions options;
   options.out_dir = std::filesystem::temp_directory_path() / "tessera_fusion_options_bench";
   options.threads = threads;
-  const auto summary =
-      tessera::pipeline::runPipeline(source, tessera::pipeline::loadRunConfig(std::nullopt), options);
+  const auto summary = tessera::pipeline::runPipeline(
+      source, tessera::pipeline::loadRunConfig(std::nullopt), options);
   double work_ms = 0.0;
   for (const auto& stage : summary.stages) {
     if (stage.name == "tracking" || stage.name == "integration") work_ms += stage.mean_ms;
@@ -354,8 +354,7 @@ int main(int argc, char** argv) {
   app.add_option("--max-frames", max_frames, "Frames to use (0: all)");
   app.add_option("--threads", threads, "Threads for OpenMP, OpenCV and the flow graph")
       ->check(CLI::PositiveNumber);
-  app.add_flag("--skip-options", skip_options,
-               "Only the comparison with the plain Open3D loop");
+  app.add_flag("--skip-options", skip_options, "Only the comparison with the plain Open3D loop");
   CLI11_PARSE(app, argc, argv);
   omp_set_num_threads(threads);
   cv::setNumThreads(threads);
@@ -369,8 +368,9 @@ int main(int argc, char** argv) {
                tessera::bench::resolvedSource(source_path), threads);
     if (!skip_options) {
       for (const double voxel : {0.01, 0.02}) {
-        fmt::print("\nTSDF integration at ground-truth poses ({:.0f} cm voxels, {:.0f} cm truncation)\n",
-                   voxel * 100, voxel * 300);
+        fmt::print(
+            "\nTSDF integration at ground-truth poses ({:.0f} cm voxels, {:.0f} cm truncation)\n",
+            voxel * 100, voxel * 300);
         for (int factor : {1, 2}) {
           const std::string res = factor == 1 ? "640x480" : "320x240";
           printRow("ScalableTSDFVolume " + res, scalableIntegration(frames, factor, voxel));

@@ -73,8 +73,15 @@ TrackingResult Tracker::track(const core::Frame& frame, const core::Isometry& in
   cv::Ptr<cv::rgbd::OdometryFrame> current = cv::rgbd::OdometryFrame::create(grey, depth);
 
   TrackingResult result;
-  const auto restart = [&](TrackingStatus status) {
+  bool prepared = false;
+  try {
+    // Prepared for both roles: as destination now, as source for the next frame.
     s.odometry->prepareFrameCache(current, cv::rgbd::OdometryFrame::CACHE_ALL);
+    prepared = true;
+  } catch (const cv::Exception& e) {
+    result.problem = fmt::format("frame unusable for odometry: {}", e.what());
+  }
+  const auto restart = [&](TrackingStatus status) {
     s.previous = current;
     s.T_W_previous = initial_T_W_C;
     s.lost_in_a_row = 0;
@@ -82,16 +89,16 @@ TrackingResult Tracker::track(const core::Frame& frame, const core::Isometry& in
     result.T_W_C = initial_T_W_C;
     return result;
   };
-  if (!s.previous) return restart(TrackingStatus::kFirst);
+  if (!s.previous && prepared) return restart(TrackingStatus::kFirst);
 
   cv::Mat Rt;  // current_p = Rt * previous_p
   bool ok = false;
-  try {
-    // Prepared for both roles: as destination now, as source for the next frame.
-    s.odometry->prepareFrameCache(current, cv::rgbd::OdometryFrame::CACHE_ALL);
-    ok = s.odometry->compute(s.previous, current, Rt);
-  } catch (const cv::Exception& e) {
-    result.problem = fmt::format("odometry failed: {}", e.what());
+  if (prepared && s.previous) {
+    try {
+      ok = s.odometry->compute(s.previous, current, Rt);
+    } catch (const cv::Exception& e) {
+      result.problem = fmt::format("odometry failed: {}", e.what());
+    }
   }
   if (!ok) {
     if (result.problem.empty()) {
@@ -99,7 +106,7 @@ TrackingResult Tracker::track(const core::Frame& frame, const core::Isometry& in
           "odometry found no motion within the bounds (too few correspondences, "
           "or a jump above the translation or rotation limit)";
     }
-    if (++s.lost_in_a_row >= config_.lost_frames_before_restart) {
+    if (++s.lost_in_a_row >= config_.lost_frames_before_restart && prepared && s.previous) {
       // Start a new segment at the last good pose: the map stays consistent around it.
       const core::Isometry last_good = s.T_W_previous;
       TrackingResult restarted = restart(TrackingStatus::kRestarted);

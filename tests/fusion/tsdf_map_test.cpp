@@ -15,8 +15,8 @@ core::Isometry cameraAt(const Eigen::Vector3d& position, double yaw_rad) {
   return T_W_C;
 }
 
-TEST(TsdfMap, SurfaceOfASyntheticPlaneLiesWithinOneVoxelOfTheTruth) {
-  TsdfConfig config;  // 1 cm voxels
+// Fuses six views of a tilted plane and checks the surface against it.
+void expectPlaneWithinOneVoxel(const TsdfConfig& config) {
   TsdfMap map(config);
   EXPECT_EQ(map.memoryBytes(), 0u);
 
@@ -46,6 +46,43 @@ TEST(TsdfMap, SurfaceOfASyntheticPlaneLiesWithinOneVoxelOfTheTruth) {
   // The plane fills the view: at 1.5 m a 640x480 Kinect sees about 1.8 m x 1.4 m.
   EXPECT_GT(hi.x() - lo.x(), 1.5);
   EXPECT_GT(hi.y() - lo.y(), 1.1);
+}
+
+TEST(TsdfMap, SurfaceOfASyntheticPlaneLiesWithinOneVoxelOfTheTruth) {
+  expectPlaneWithinOneVoxel(TsdfConfig{});  // 2 cm voxels, depth at half resolution
+}
+
+TEST(TsdfMap, FullAndHalfResolutionIntegrationKeepOneCentimetreVoxelsOnThePlane) {
+  for (const int scale : {1, 2}) {
+    SCOPED_TRACE(scale);
+    TsdfConfig config;
+    config.voxel_size_m = 0.01;
+    config.truncation_m = 0.04;
+    config.integration_scale = scale;
+    expectPlaneWithinOneVoxel(config);
+  }
+}
+
+TEST(TsdfMap, BlocksFartherThanTheReleaseDistanceAreFreed) {
+  TsdfMap map(TsdfConfig{});
+  const core::Intrinsics k = test::kinectIntrinsics();
+  const Eigen::Vector3d n(0, 0, -1);
+  const core::Isometry T_W_C = core::Isometry::Identity();
+  map.integrate(test::renderPlane(k, T_W_C, n, n.dot(Eigen::Vector3d(0, 0, 1.5))), T_W_C);
+  const std::size_t blocks = map.blockCount();
+  ASSERT_GT(blocks, 0u);
+  const std::size_t bytes_per_block = map.memoryBytes() / blocks;
+  // The plane spans 1.5 m to about 1.9 m from the camera (the corners of the view).
+  EXPECT_EQ(map.releaseBlocksFartherThan(T_W_C.translation(), 3.0), 0u);
+  EXPECT_EQ(map.blockCount(), blocks);
+  const std::size_t released = map.releaseBlocksFartherThan(T_W_C.translation(), 1.7);
+  EXPECT_GT(released, 0u);
+  EXPECT_LT(released, blocks);  // the centre of the plane stays
+  EXPECT_EQ(map.blockCount(), blocks - released);
+  EXPECT_EQ(map.memoryBytes(), (blocks - released) * bytes_per_block);
+  EXPECT_EQ(map.releaseBlocksFartherThan(Eigen::Vector3d(0, 0, -10), 1.0), map.blockCount());
+  EXPECT_EQ(map.blockCount(), 0u);
+  EXPECT_EQ(map.memoryBytes(), 0u);
 }
 
 TEST(TsdfMap, DepthOutsideTheConfiguredRangeIsIgnored) {
