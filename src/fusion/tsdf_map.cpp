@@ -109,9 +109,8 @@ void TsdfMap::integrate(const core::Frame& frame, const core::Isometry& T_W_C) {
   rgbd.depth_ = depthMetres(frame.depth_mm, step, config_.min_depth_m, config_.max_depth_m);
   rgbd.color_ = colourImage(frame.rgb, rgbd.depth_.width_, rgbd.depth_.height_);
   // Pixel u of the subsampled image is pixel step*u of the original: f and c scale by 1/step.
-  const o3d::camera::PinholeCameraIntrinsic intrinsic(rgbd.depth_.width_, rgbd.depth_.height_,
-                                                      k.fx / step, k.fy / step, k.cx / step,
-                                                      k.cy / step);
+  const o3d::camera::PinholeCameraIntrinsic intrinsic(
+      rgbd.depth_.width_, rgbd.depth_.height_, k.fx / step, k.fy / step, k.cx / step, k.cy / step);
   // Open3D takes the extrinsic as world-to-camera.
   const Eigen::Matrix4d T_C_W = T_W_C.inverse().matrix();
   volume_->tsdf.Integrate(rgbd, intrinsic, T_C_W);
@@ -126,14 +125,17 @@ SurfaceMesh TsdfMap::extractMesh() const {
   return out;
 }
 
-std::size_t TsdfMap::releaseBlocksFartherThan(const Eigen::Vector3d& camera_position,
-                                              double distance_m) {
+std::size_t TsdfMap::releaseBlocksBehind(const core::Isometry& T_W_C, double distance_m) {
   auto& units = volume_->tsdf.volume_units_;
   const double block_m = config_.voxel_size_m * config_.block_resolution;
+  const core::Isometry T_C_W = T_W_C.inverse();
   std::size_t released = 0;
   for (auto it = units.begin(); it != units.end();) {
-    const Eigen::Vector3d centre = (it->first.cast<double>() + Eigen::Vector3d::Constant(0.5)) * block_m;
-    if ((centre - camera_position).norm() > distance_m) {
+    // Open3D keys a block by its integer index; it spans [index, index + 1) * block edge.
+    const Eigen::Vector3d centre_W =
+        (it->first.cast<double>() + Eigen::Vector3d::Constant(0.5)) * block_m;
+    const Eigen::Vector3d centre_C = T_C_W * centre_W;
+    if (centre_C.z() < 0.0 && centre_C.norm() > distance_m) {
       it = units.erase(it);
       ++released;
     } else {

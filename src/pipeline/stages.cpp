@@ -100,8 +100,7 @@ FusedFrame IntegrationStage::process(TrackedFrame tracked) {
         map_.integrate(tracked.frame, *fused.T_W_C);
         fused.integrated = true;
         if (release_distance_m_ > 0.0) {
-          fused.tsdf_blocks_released =
-              map_.releaseBlocksFartherThan(fused.T_W_C->translation(), release_distance_m_);
+          fused.tsdf_blocks_released = map_.releaseBlocksBehind(*fused.T_W_C, release_distance_m_);
           blocks_released_ += fused.tsdf_blocks_released;
         }
       }

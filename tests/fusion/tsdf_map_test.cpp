@@ -63,25 +63,31 @@ TEST(TsdfMap, FullAndHalfResolutionIntegrationKeepOneCentimetreVoxelsOnThePlane)
   }
 }
 
-TEST(TsdfMap, BlocksFartherThanTheReleaseDistanceAreFreed) {
+TEST(TsdfMap, BlocksFarBehindTheCameraAreFreed) {
   TsdfMap map(TsdfConfig{});
   const core::Intrinsics k = test::kinectIntrinsics();
   const Eigen::Vector3d n(0, 0, -1);
-  const core::Isometry T_W_C = core::Isometry::Identity();
+  const core::Isometry T_W_C = core::Isometry::Identity();  // looking along world +z
   map.integrate(test::renderPlane(k, T_W_C, n, n.dot(Eigen::Vector3d(0, 0, 1.5))), T_W_C);
   const std::size_t blocks = map.blockCount();
   ASSERT_GT(blocks, 0u);
   const std::size_t bytes_per_block = map.memoryBytes() / blocks;
-  // The plane spans 1.5 m to about 1.9 m from the camera (the corners of the view).
-  EXPECT_EQ(map.releaseBlocksFartherThan(T_W_C.translation(), 3.0), 0u);
+
+  // The plane is 1.5 m ahead: nothing is behind the camera.
+  EXPECT_EQ(map.releaseBlocksBehind(T_W_C, 0.5), 0u);
+  // Driven on to 3 m along +z, still looking along +z, the plane is 1.5 m behind: freed only
+  // when the distance allows it.
+  core::Isometry past = core::Isometry::Identity();
+  past.translation() = Eigen::Vector3d(0, 0, 3.0);
+  EXPECT_EQ(map.releaseBlocksBehind(past, 3.0), 0u);
   EXPECT_EQ(map.blockCount(), blocks);
-  const std::size_t released = map.releaseBlocksFartherThan(T_W_C.translation(), 1.7);
+  // From 1.5 m the plane's centre blocks stay, its far corners (up to ~1.9 m) go.
+  const std::size_t released = map.releaseBlocksBehind(past, 1.7);
   EXPECT_GT(released, 0u);
-  EXPECT_LT(released, blocks);  // the centre of the plane stays
+  EXPECT_LT(released, blocks);
   EXPECT_EQ(map.blockCount(), blocks - released);
   EXPECT_EQ(map.memoryBytes(), (blocks - released) * bytes_per_block);
-  EXPECT_EQ(map.releaseBlocksFartherThan(Eigen::Vector3d(0, 0, -10), 1.0), map.blockCount());
-  EXPECT_EQ(map.blockCount(), 0u);
+  EXPECT_EQ(map.releaseBlocksBehind(past, 0.5), blocks - released);
   EXPECT_EQ(map.memoryBytes(), 0u);
 }
 

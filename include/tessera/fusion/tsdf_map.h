@@ -26,8 +26,9 @@ struct TsdfConfig {
   // is geometry only, and its cost grows with the pixels cast. Colour for texturing is taken
   // from the full-resolution frames by later stages, never from voxels.
   int integration_scale = 2;
-  // Blocks farther than this from the camera are released after each frame (0: keep all), so
-  // memory stays bounded on long runs. Later stages finalize the planes there first.
+  // Blocks behind the camera and farther than this from it are released after each frame
+  // (0: keep all), so memory stays bounded on long runs. Later stages finalize the planes
+  // there first.
   double release_distance_m = 0.0;
 };
 
@@ -59,9 +60,10 @@ class TsdfMap {
   // Zero-crossing surface by marching cubes.
   SurfaceMesh extractMesh() const;
 
-  // Frees the blocks whose centre is farther than distance_m from `camera_position`; returns
+  // Frees the blocks far behind the camera at T_W_C: centre farther than distance_m from it and
+  // behind its image plane (so nothing the camera looks at is freed and re-allocated). Returns
   // how many were freed.
-  std::size_t releaseBlocksFartherThan(const Eigen::Vector3d& camera_position, double distance_m);
+  std::size_t releaseBlocksBehind(const core::Isometry& T_W_C, double distance_m);
 
   // Bytes held by allocated voxel blocks.
   std::size_t memoryBytes() const;
