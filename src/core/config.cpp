@@ -1,6 +1,6 @@
-#include <cmath>
 #include "tessera/core/config.h"
 
+#include <cmath>
 #include <optional>
 #include <set>
 

@@ -15,8 +15,7 @@ int defaultThreadCount() {
 }
 
 void runGraph(SourceStage& source, TrackingStage& tracking, IntegrationStage& integration,
-              StatsSink& sink,
-              const GraphOptions& options) {
+              StatsSink& sink, const GraphOptions& options) {
   const int threads = options.threads > 0 ? options.threads : defaultThreadCount();
   oneapi::tbb::task_arena arena(threads);
   arena.execute([&] {

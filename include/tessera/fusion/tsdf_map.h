@@ -15,8 +15,8 @@
 namespace tessera::fusion {
 
 struct TsdfConfig {
-  // 2 cm: the TSDF is geometry only (textures come from the raw colour frames), and 1 cm cost
-  // 4x the integration time and memory (docs/ARCHITECTURE.md has the measurements).
+  // 2 cm: the TSDF is geometry only (textures come from the raw colour frames), and 1 cm costs
+  // 3-5x the integration time and 4x the memory (measurements in docs/ARCHITECTURE.md).
   double voxel_size_m = 0.02;  // edge of one voxel
   double truncation_m = 0.06;  // TSDF truncation distance (a few voxels)
   double min_depth_m = 0.3;    // depth below this is ignored (Kinect v1 minimum ~0.4 m)
