@@ -50,7 +50,8 @@ double msSince(Clock::time_point start) {
 }
 
 // A frame at `scale` of its resolution: depth by nearest neighbour (no mixing across edges),
-// colour by area averaging.
+// colour by area averaging. Pixel u of the result is pixel factor*u of the frame, as in
+// tessera's own integration, so f and c scale by 1/factor.
 struct ScaledFrame {
   cv::Mat depth_mm, rgb;
   double fx, fy, cx, cy;
@@ -64,8 +65,8 @@ ScaledFrame scaled(const Frame& frame, int factor) {
   out.height = k.height / factor;
   out.fx = k.fx / factor;
   out.fy = k.fy / factor;
-  out.cx = (k.cx + 0.5) / factor - 0.5;
-  out.cy = (k.cy + 0.5) / factor - 0.5;
+  out.cx = k.cx / factor;
+  out.cy = k.cy / factor;
   if (factor == 1) {
     out.depth_mm = frame.depth_mm;
     out.rgb = frame.rgb;
@@ -97,22 +98,22 @@ struct Timing {
   std::string note;
 };
 
-extern int odometry_failures;
-
 void printRow(const std::string& name, const Timing& t) {
-  fmt::print("  {:<58} {:8.2f} ms/frame {:7.1f} frames/s  {}{}\n", name, t.ms_per_frame,
-             1000.0 / t.ms_per_frame, t.note,
-             odometry_failures > 0 ? fmt::format("; {} odometry failures", odometry_failures) : "");
-  odometry_failures = 0;
+  fmt::print("  {:<58} {:8.2f} ms/frame {:7.1f} frames/s  {}\n", name, t.ms_per_frame,
+             1000.0 / t.ms_per_frame, t.note);
 }
 
 constexpr float kTruncVoxels = 3.0f;  // truncation in voxels, as tessera's default (6 cm / 2 cm)
 
+// ATE of a tracked trajectory, and how many frames kept the previous pose because the
+// odometry failed.
 std::string ateNote(const tessera::eval::Trajectory& estimate,
-                    const tessera::eval::Trajectory& truth) {
+                    const tessera::eval::Trajectory& truth, int odometry_failures = 0) {
   const auto ate = tessera::eval::absoluteTrajectoryError(estimate, truth);
-  return ate ? fmt::format("ATE {:.1f} mm over {} poses", ate->rmse_m * 1e3, ate->pairs)
-             : std::string("ATE: too few poses");
+  std::string note = ate ? fmt::format("ATE {:.1f} mm over {} poses", ate->rmse_m * 1e3, ate->pairs)
+                         : std::string("ATE: too few poses");
+  if (odometry_failures > 0) note += fmt::format("; {} odometry failures", odometry_failures);
+  return note;
 }
 
 Timing scalableIntegration(const std::vector<Frame>& frames, int factor, double voxel) {
@@ -197,8 +198,6 @@ cv::Ptr<cv::rgbd::RgbdICPOdometry> makeOdometry(const ScaledFrame& f) {
   return cv::rgbd::RgbdICPOdometry::create(K, 0.3f, 4.0f, 0.07f);
 }
 
-int odometry_failures = 0;  // reset per option; failures keep the previous pose
-
 // The pose of `current` from the odometry that maps `reference` points (seen from
 // T_W_reference) into `current`; nothing when the odometry fails.
 std::optional<Isometry> odometryStep(cv::rgbd::RgbdICPOdometry& odometry,
@@ -207,7 +206,6 @@ std::optional<Isometry> odometryStep(cv::rgbd::RgbdICPOdometry& odometry,
   cv::Mat Rt;
   if (!odometry.compute(reference.grey, reference.depth, cv::Mat(), current.grey, current.depth,
                         cv::Mat(), Rt)) {
-    ++odometry_failures;
     return std::nullopt;
   }
   Eigen::Matrix4d T_current_reference;
@@ -231,6 +229,7 @@ Timing frameToModel(const std::vector<Frame>& frames, int factor) {
   Isometry T_W_C = *frames.front().T_W_C_gt;
   o3d::core::Tensor blocks;
   double total = 0.0, raycast_ms = 0.0;
+  int failures = 0;
   for (const Frame& frame : frames) {
     const ScaledFrame f = scaled(frame, factor);
     const auto start = Clock::now();
@@ -247,7 +246,9 @@ Timing frameToModel(const std::vector<Frame>& frames, int factor) {
       cv::Mat colour = matOf(view["color"], CV_32FC3);
       colour.convertTo(colour, CV_8UC3, 255.0);
       cv::cvtColor(colour, model.grey, cv::COLOR_RGB2GRAY);
-      T_W_C = odometryStep(*odometry, model, odometryImages(f), T_W_C).value_or(T_W_C);
+      const auto tracked = odometryStep(*odometry, model, odometryImages(f), T_W_C);
+      failures += tracked ? 0 : 1;
+      T_W_C = tracked.value_or(T_W_C);
     }
     blocks = integrateBlockGrid(grid, f, T_W_C);
     total += msSince(start);
@@ -256,7 +257,7 @@ Timing frameToModel(const std::vector<Frame>& frames, int factor) {
   }
   const double n = static_cast<double>(frames.size());
   return {total / n, fmt::format("incl. integration, raycast {:.1f} ms; {}", raycast_ms / n,
-                                 ateNote(estimate, truth))};
+                                 ateNote(estimate, truth, failures))};
 }
 
 // OpenCV's RgbdICPOdometry, frame to frame (what the first tracker did).
@@ -266,20 +267,23 @@ Timing opencvFrameToFrame(const std::vector<Frame>& frames, int factor) {
   Isometry T_W_C = *frames.front().T_W_C_gt;
   OdometryImages previous;
   double total = 0.0;
+  int failures = 0;
   for (const Frame& frame : frames) {
     const ScaledFrame f = scaled(frame, factor);
     const auto start = Clock::now();
     if (!odometry) odometry = makeOdometry(f);
     OdometryImages current = odometryImages(f);
     if (!previous.depth.empty()) {
-      T_W_C = odometryStep(*odometry, previous, current, T_W_C).value_or(T_W_C);
+      const auto tracked = odometryStep(*odometry, previous, current, T_W_C);
+      failures += tracked ? 0 : 1;
+      T_W_C = tracked.value_or(T_W_C);
     }
     previous = std::move(current);
     total += msSince(start);
     estimate[frame.timestamp_ns] = T_W_C;
     truth[frame.timestamp_ns] = *frame.T_W_C_gt;
   }
-  return {total / static_cast<double>(frames.size()), ateNote(estimate, truth)};
+  return {total / static_cast<double>(frames.size()), ateNote(estimate, truth, failures)};
 }
 
 o3d::geometry::Image legacyImage(const cv::Mat& mat) {

@@ -83,8 +83,7 @@ TrackedFrame TrackingStage::process(core::Frame frame) {
   return tracked;
 }
 
-IntegrationStage::IntegrationStage(const fusion::TsdfConfig& tsdf, int thread_cap)
-    : map_(tsdf), release_distance_m_(tsdf.release_distance_m) {
+IntegrationStage::IntegrationStage(const fusion::TsdfConfig& tsdf, int thread_cap) : map_(tsdf) {
   map_.setThreadCap(thread_cap);
 }
 
@@ -99,8 +98,8 @@ FusedFrame IntegrationStage::process(TrackedFrame tracked) {
       if (fused.T_W_C) {
         map_.integrate(tracked.frame, *fused.T_W_C);
         fused.integrated = true;
-        if (release_distance_m_ > 0.0) {
-          fused.tsdf_blocks_released = map_.releaseBlocksBehind(*fused.T_W_C, release_distance_m_);
+        if (const double distance_m = map_.config().release_distance_m; distance_m > 0.0) {
+          fused.tsdf_blocks_released = map_.releaseBlocksBehind(*fused.T_W_C, distance_m);
           blocks_released_ += fused.tsdf_blocks_released;
         }
       }

@@ -3,40 +3,9 @@
 #include <algorithm>
 #include <cmath>
 
-#include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
 
 namespace tessera::planes {
-
-namespace {
-
-struct FittedPlane {
-  Eigen::Vector3d normal;
-  double offset;
-  Eigen::Vector3d centroid;
-  Eigen::Vector3d major_axis;  // direction of largest spread
-};
-
-// Least squares from moments: the centroid and the scatter matrix's smallest eigenvector.
-FittedPlane fit(double count, const Eigen::Vector3d& sum, const Eigen::Matrix3d& outer) {
-  FittedPlane plane;
-  plane.centroid = sum / count;
-  const Eigen::Matrix3d scatter = outer / count - plane.centroid * plane.centroid.transpose();
-  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver(scatter);
-  plane.normal = solver.eigenvectors().col(0);
-  plane.major_axis = solver.eigenvectors().col(2);
-  plane.offset = plane.normal.dot(plane.centroid);
-  return plane;
-}
-
-FittedPlane fitPoints(const std::vector<Eigen::Vector3d>& points) {
-  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-  Eigen::Matrix3d outer = Eigen::Matrix3d::Zero();
-  for (const auto& X : points) sum += X, outer += X * X.transpose();
-  return fit(static_cast<double>(points.size()), sum, outer);
-}
-
-}  // namespace
 
 std::vector<PlaneObservation> observationsOf(const core::Frame& frame,
                                              const PlaneDetection& detection,
@@ -90,14 +59,15 @@ bool PatchMap::continues(const Patch& patch, const Eigen::Vector3d& normal, doub
   return false;
 }
 
-void PatchMap::addPoints(Patch& patch, const std::vector<Eigen::Vector3d>& points) const {
-  for (const auto& X : points) {
-    patch.cells.insert(patch.cellOf(X, config_.cell_m));
-    patch.point_count += 1.0;
-    patch.point_sum += X;
-    patch.point_outer += X * X.transpose();
-  }
-  const FittedPlane plane = fit(patch.point_count, patch.point_sum, patch.point_outer);
+void PatchMap::addObservation(Patch& patch, const std::vector<Eigen::Vector3d>& points,
+                              const PointMoments& moments) const {
+  for (const auto& X : points) patch.cells.insert(patch.cellOf(X, config_.cell_m));
+  patch.moments.add(moments);
+  refit(patch);
+}
+
+void PatchMap::refit(Patch& patch) {
+  const PlaneFit plane = fitPlane(patch.moments);
   // Keep the orientation the patch was created with.
   const double sign = plane.normal.dot(patch.normal) < 0.0 ? -1.0 : 1.0;
   patch.normal = sign * plane.normal;
@@ -108,10 +78,8 @@ void PatchMap::absorb(Patch& into, const Patch& other) const {
   for (const Cell& cell : other.cells) {
     into.cells.insert(into.cellOf(other.cellCentre(cell, config_.cell_m), config_.cell_m));
   }
-  into.point_count += other.point_count;
-  into.point_sum += other.point_sum;
-  into.point_outer += other.point_outer;
-  addPoints(into, {});  // refit from the summed moments
+  into.moments.add(other.moments);
+  refit(into);
 }
 
 std::vector<int> PatchMap::add(const std::vector<PlaneObservation>& observations) {
@@ -121,7 +89,9 @@ std::vector<int> PatchMap::add(const std::vector<PlaneObservation>& observations
       ids.push_back(-1);
       continue;
     }
-    const FittedPlane plane = fitPoints(observation.points_W);
+    PointMoments moments;
+    for (const auto& X : observation.points_W) moments.add(X);
+    const PlaneFit plane = fitPlane(moments);
     std::vector<std::size_t> matches;
     for (std::size_t i = 0; i < patches_.size(); ++i) {
       if (continues(patches_[i], plane.normal, plane.offset, observation.points_W)) {
@@ -134,10 +104,9 @@ std::vector<int> PatchMap::add(const std::vector<PlaneObservation>& observations
       patch.normal = plane.normal;
       patch.offset = plane.offset;
       patch.origin = plane.centroid;
-      patch.u_axis =
-          (plane.major_axis - plane.major_axis.dot(plane.normal) * plane.normal).normalized();
+      patch.u_axis = plane.major_axis;  // eigenvectors: already orthogonal to the normal
       patch.v_axis = plane.normal.cross(patch.u_axis);
-      addPoints(patch, observation.points_W);
+      addObservation(patch, observation.points_W, moments);
       patches_.push_back(std::move(patch));
       ids.push_back(patches_.back().id);
       continue;
@@ -147,7 +116,7 @@ std::vector<int> PatchMap::add(const std::vector<PlaneObservation>& observations
     for (std::size_t m = matches.size(); m-- > 1;) {
       absorb(kept, patches_[matches[m]]);
     }
-    addPoints(kept, observation.points_W);
+    addObservation(kept, observation.points_W, moments);
     const int kept_id = kept.id;
     for (std::size_t m = matches.size(); m-- > 1;) {
       patches_.erase(patches_.begin() + static_cast<std::ptrdiff_t>(matches[m]));

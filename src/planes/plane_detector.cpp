@@ -1,10 +1,10 @@
 #include "tessera/planes/plane_detector.h"
 
 #include <fmt/format.h>
-#include <Eigen/Eigenvalues>
 #include <opencv2/rgbd.hpp>
 
 #include "tessera/core/error.h"
+#include "tessera/planes/plane_fit.h"
 
 namespace tessera::planes {
 
@@ -34,33 +34,23 @@ cv::Mat organisedPoints(const core::Frame& frame, int step, double min_m, double
   return points;
 }
 
-// Least-squares plane of the points labelled `label`: the centroid and the direction of least
-// variance (smallest eigenvector of the scatter matrix).
+// Least-squares plane of the points labelled `label`, its normal facing the camera.
 DetectedPlane refit(const cv::Mat& points, const cv::Mat& labels, int label) {
-  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-  Eigen::Matrix3d outer = Eigen::Matrix3d::Zero();
-  std::size_t n = 0;
+  PointMoments moments;
   for (int v = 0; v < labels.rows; ++v) {
     const auto* l = labels.ptr<std::uint8_t>(v);
     const auto* p = points.ptr<cv::Vec3f>(v);
     for (int u = 0; u < labels.cols; ++u) {
-      if (l[u] != label) continue;
-      const Eigen::Vector3d X(p[u][0], p[u][1], p[u][2]);
-      sum += X;
-      outer += X * X.transpose();
-      ++n;
+      if (l[u] == label) moments.add(Eigen::Vector3d(p[u][0], p[u][1], p[u][2]));
     }
   }
+  const PlaneFit fit = fitPlane(moments);
   DetectedPlane plane;
-  plane.pixels = n;
-  plane.centroid_C = sum / static_cast<double>(n);
-  const Eigen::Matrix3d scatter =
-      outer / static_cast<double>(n) - plane.centroid_C * plane.centroid_C.transpose();
-  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver(scatter);
-  plane.normal_C = solver.eigenvectors().col(0);  // eigenvalues ascend
-  if (plane.normal_C.dot(plane.centroid_C) > 0.0) plane.normal_C = -plane.normal_C;
+  plane.pixels = static_cast<std::size_t>(moments.count);
+  plane.centroid_C = fit.centroid;
+  plane.normal_C = fit.normal.dot(fit.centroid) > 0.0 ? Eigen::Vector3d(-fit.normal) : fit.normal;
   plane.offset_C = plane.normal_C.dot(plane.centroid_C);
-  plane.rms_residual_m = std::sqrt(std::max(0.0, solver.eigenvalues()(0)));
+  plane.rms_residual_m = fit.rms_residual_m;
   return plane;
 }
 

@@ -65,6 +65,8 @@ class TsdfMap {
   // how many were freed.
   std::size_t releaseBlocksBehind(const core::Isometry& T_W_C, double distance_m);
 
+  const TsdfConfig& config() const { return config_; }
+
   // Bytes held by allocated voxel blocks.
   std::size_t memoryBytes() const;
   std::size_t blockCount() const;

@@ -105,7 +105,6 @@ class IntegrationStage {
 
  private:
   fusion::TsdfMap map_;
-  double release_distance_m_;
   std::size_t integrated_ = 0;
   std::size_t skipped_ = 0;
   std::size_t blocks_released_ = 0;

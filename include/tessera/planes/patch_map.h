@@ -12,6 +12,7 @@
 #include "tessera/core/frame.h"
 #include "tessera/core/pose.h"
 #include "tessera/planes/plane_detector.h"
+#include "tessera/planes/plane_fit.h"
 
 namespace tessera::planes {
 
@@ -42,10 +43,7 @@ struct Patch {
   Eigen::Vector3d u_axis = Eigen::Vector3d::UnitX();
   Eigen::Vector3d v_axis = Eigen::Vector3d::UnitY();
   std::set<Cell> cells;
-  // Moments of every point ever added, for the least-squares refit.
-  double point_count = 0.0;
-  Eigen::Vector3d point_sum = Eigen::Vector3d::Zero();
-  Eigen::Matrix3d point_outer = Eigen::Matrix3d::Zero();
+  PointMoments moments;  // of every point ever added, for the least-squares refit
 
   Cell cellOf(const Eigen::Vector3d& X_W, double cell_m) const;
   Eigen::Vector3d cellCentre(const Cell& cell, double cell_m) const;
@@ -66,7 +64,9 @@ class PatchMap {
   bool continues(const Patch& patch, const Eigen::Vector3d& normal, double offset,
                  const std::vector<Eigen::Vector3d>& points) const;
   void absorb(Patch& into, const Patch& other) const;
-  void addPoints(Patch& patch, const std::vector<Eigen::Vector3d>& points) const;
+  void addObservation(Patch& patch, const std::vector<Eigen::Vector3d>& points,
+                      const PointMoments& moments) const;
+  static void refit(Patch& patch);
 
   PatchMapConfig config_;
   std::vector<Patch> patches_;
