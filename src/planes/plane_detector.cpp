@@ -1,5 +1,9 @@
 #include "tessera/planes/plane_detector.h"
 
+#include <cmath>
+#include <limits>
+#include <utility>
+
 #include <fmt/format.h>
 #include <opencv2/rgbd.hpp>
 
@@ -12,46 +16,89 @@ PlaneDetector::PlaneDetector(const PlaneDetectorConfig& config) : config_(config
 
 namespace {
 
-// Camera-frame points of every `step`-th pixel; invalid depth gives NaN, as RgbdPlane expects.
-cv::Mat organisedPoints(const core::Frame& frame, int step, double min_m, double max_m) {
+// Per working pixel: the camera-frame point, and the same pixel as (u, v, disparity), the space
+// RgbdPlane searches. Invalid depth gives NaN, as RgbdPlane expects.
+struct OrganisedPoints {
+  cv::Mat points_C;   // CV_32FC3
+  cv::Mat disparity;  // CV_32FC3: u, v in working pixels, disparity in pixels
+};
+
+OrganisedPoints organisedPoints(const core::Frame& frame, const PlaneDetectorConfig& config) {
   const core::Intrinsics& k = frame.intrinsics;
+  const int step = config.working_scale;
   const int width = k.width / step, height = k.height / step;
-  cv::Mat points(height, width, CV_32FC3);
+  const double focal_baseline = k.fx * config.baseline_m;
+  OrganisedPoints out{cv::Mat(height, width, CV_32FC3), cv::Mat(height, width, CV_32FC3)};
   const float nan = std::numeric_limits<float>::quiet_NaN();
   for (int v = 0; v < height; ++v) {
     const auto* depth = frame.depth_mm.ptr<std::uint16_t>(v * step);
-    auto* out = points.ptr<cv::Vec3f>(v);
+    auto* point = out.points_C.ptr<cv::Vec3f>(v);
+    auto* uvw = out.disparity.ptr<cv::Vec3f>(v);
     for (int u = 0; u < width; ++u) {
       const double z = depth[u * step] * 1e-3;
-      if (z < min_m || z > max_m) {
-        out[u] = cv::Vec3f(nan, nan, nan);
+      if (z < config.min_depth_m || z > config.max_depth_m) {
+        point[u] = uvw[u] = cv::Vec3f(nan, nan, nan);
         continue;
       }
-      out[u] = cv::Vec3f(static_cast<float>((u * step - k.cx) * z / k.fx),
-                         static_cast<float>((v * step - k.cy) * z / k.fy), static_cast<float>(z));
+      point[u] = cv::Vec3f(static_cast<float>((u * step - k.cx) * z / k.fx),
+                           static_cast<float>((v * step - k.cy) * z / k.fy), static_cast<float>(z));
+      uvw[u] = cv::Vec3f(static_cast<float>(u), static_cast<float>(v),
+                         static_cast<float>(focal_baseline / z));
     }
   }
-  return points;
+  return out;
 }
 
-// Least-squares plane of the points labelled `label`, its normal facing the camera.
-DetectedPlane refit(const cv::Mat& points, const cv::Mat& labels, int label) {
+PointMoments momentsOf(const cv::Mat& points, const cv::Mat& members) {
   PointMoments moments;
-  for (int v = 0; v < labels.rows; ++v) {
-    const auto* l = labels.ptr<std::uint8_t>(v);
+  for (int v = 0; v < members.rows; ++v) {
+    const auto* m = members.ptr<std::uint8_t>(v);
     const auto* p = points.ptr<cv::Vec3f>(v);
-    for (int u = 0; u < labels.cols; ++u) {
-      if (l[u] == label) moments.add(Eigen::Vector3d(p[u][0], p[u][1], p[u][2]));
+    for (int u = 0; u < members.cols; ++u) {
+      if (m[u] != 0) moments.add(Eigen::Vector3d(p[u][0], p[u][1], p[u][2]));
     }
   }
-  const PlaneFit fit = fitPlane(moments);
+  return moments;
+}
+
+// Keeps the pixels of `region` whose disparity is within `threshold_px` of the disparity the
+// plane n . X = offset predicts there: z = offset / (n . ray), ray = ((u-cx)/fx, (v-cy)/fy, 1).
+cv::Mat membersNear(const OrganisedPoints& organised, const cv::Mat& region, const PlaneFit& plane,
+                    const core::Intrinsics& k, const PlaneDetectorConfig& config) {
+  cv::Mat members = cv::Mat::zeros(region.size(), CV_8UC1);
+  const double focal_baseline = k.fx * config.baseline_m;
+  const int step = config.working_scale;
+  for (int v = 0; v < region.rows; ++v) {
+    const auto* in = region.ptr<std::uint8_t>(v);
+    const auto* uvw = organised.disparity.ptr<cv::Vec3f>(v);
+    auto* out = members.ptr<std::uint8_t>(v);
+    for (int u = 0; u < region.cols; ++u) {
+      if (in[u] == 0) continue;
+      const Eigen::Vector3d ray((u * step - k.cx) / k.fx, (v * step - k.cy) / k.fy, 1.0);
+      const double predicted = focal_baseline * plane.normal.dot(ray) / plane.offset;
+      if (std::abs(uvw[u][2] - predicted) <= config.refit_threshold_px) out[u] = 1;
+    }
+  }
+  return members;
+}
+
+// The region's 3-D least-squares plane, refitted once more after dropping the pixels far from
+// the first fit. Returns the members kept (CV_8U, nonzero) and the plane facing the camera.
+std::pair<cv::Mat, DetectedPlane> refit(const OrganisedPoints& organised, const cv::Mat& region,
+                                        const core::Intrinsics& k,
+                                        const PlaneDetectorConfig& config) {
+  PlaneFit fit = fitPlane(momentsOf(organised.points_C, region));
+  cv::Mat members = membersNear(organised, region, fit, k, config);
+  const PointMoments moments = momentsOf(organised.points_C, members);
   DetectedPlane plane;
   plane.pixels = static_cast<std::size_t>(moments.count);
+  if (moments.count < 3) return {members, plane};
+  fit = fitPlane(moments);
   plane.centroid_C = fit.centroid;
   plane.normal_C = fit.normal.dot(fit.centroid) > 0.0 ? Eigen::Vector3d(-fit.normal) : fit.normal;
   plane.offset_C = plane.normal_C.dot(plane.centroid_C);
   plane.rms_residual_m = fit.rms_residual_m;
-  return plane;
+  return {members, plane};
 }
 
 }  // namespace
@@ -65,27 +112,27 @@ PlaneDetection PlaneDetector::detect(const core::Frame& frame) const {
   }
   PlaneDetection detection;
   detection.scale = config_.working_scale;
-  const cv::Mat points =
-      organisedPoints(frame, config_.working_scale, config_.min_depth_m, config_.max_depth_m);
+  const OrganisedPoints organised = organisedPoints(frame, config_);
 
-  // Error model: a point belongs to a plane within threshold + a z^2 (RgbdPlane's
-  // sensor_error terms), so far, noisier depth is not split into slivers.
   const cv::Ptr<cv::rgbd::RgbdPlane> finder = cv::rgbd::RgbdPlane::create(
       cv::rgbd::RgbdPlane::RGBD_PLANE_METHOD_DEFAULT, config_.block_size, config_.min_pixels,
-      config_.threshold_m, config_.sensor_error_a, 0.0, 0.0);
+      config_.threshold_px);
+  cv::Mat grown;
   cv::Mat coefficients;
   try {
-    (*finder)(points, detection.labels, coefficients);
+    (*finder)(organised.disparity, grown, coefficients);
   } catch (const cv::Exception& e) {
     throw core::Error(fmt::format("frame {}: plane detection failed: {}", frame.index, e.what()));
   }
-  if (detection.labels.empty()) {
-    detection.labels = cv::Mat(points.size(), CV_8UC1, cv::Scalar(PlaneDetection::kNoPlane));
-  }
+  detection.labels =
+      cv::Mat(organised.points_C.size(), CV_8UC1, cv::Scalar(PlaneDetection::kNoPlane));
+  if (grown.empty()) return detection;
   const int found = std::min(coefficients.rows, static_cast<int>(PlaneDetection::kNoPlane));
-  // RgbdPlane keeps only regions of at least min_pixels, so every label has points.
   for (int label = 0; label < found; ++label) {
-    detection.planes.push_back(refit(points, detection.labels, label));
+    auto [members, plane] = refit(organised, grown == label, k, config_);
+    if (plane.pixels < static_cast<std::size_t>(config_.min_pixels)) continue;
+    detection.labels.setTo(static_cast<int>(detection.planes.size()), members);
+    detection.planes.push_back(plane);
   }
   return detection;
 }

@@ -48,8 +48,8 @@ TEST(PlaneDetector, FrameWhoseSizeDisagreesWithItsIntrinsicsIsRejected) {
 }
 
 // Every plane found in noisy Kinect v1 frames of the office is one of the scene's planes,
-// within the bounds (normal within 2 degrees, offset within 1 cm; measured: at most
-// 0.25 degrees and 7 mm), and each frame shows at least two of them.
+// within the bounds (normal within 2 degrees, offset within 1 cm), and each frame shows
+// at least two of them. Two parallel faces 10 cm apart at 2.9 m (frame 80) must not become one.
 TEST(PlaneDetector, PlanesOfTheNoisyOfficeMatchTheSceneGroundTruth) {
   const synthetic::Scene scene =
       synthetic::loadScene(test::sourceDir() / "config/scenes/office.yaml");
@@ -76,7 +76,7 @@ TEST(PlaneDetector, PlanesOfTheNoisyOfficeMatchTheSceneGroundTruth) {
         if (offset < 0.05 && angle < best_angle) best_angle = angle, best_offset = offset;
       }
       EXPECT_LT(best_angle, 2.0) << plane.pixels << " pixels at " << plane.centroid_C.transpose();
-      EXPECT_LT(best_offset, 0.01);
+      EXPECT_LT(best_offset, 0.01) << plane.pixels << " pixels, n_W " << n_W.transpose();
     }
   }
 }

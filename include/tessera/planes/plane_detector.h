@@ -1,7 +1,8 @@
 #pragma once
-// Per-frame detection of planar regions in organised depth. OpenCV's RgbdPlane grows regions
-// from blocks of pixels whose points fit a plane (with a depth-dependent error model for the
-// Kinect), then each region's plane is refitted to all its points by least squares.
+// Per-frame detection of planar regions in organised depth. A plane in 3-D is also a plane in
+// (u, v, disparity), and a structured-light sensor's noise and quantisation are nearly uniform
+// in disparity, so OpenCV's RgbdPlane grows regions there with one threshold for every range.
+// Each region is then refitted in 3-D by least squares, dropping pixels off the fitted plane.
 #include <cstddef>
 #include <vector>
 
@@ -15,11 +16,15 @@ namespace tessera::planes {
 struct PlaneDetectorConfig {
   int working_scale = 2;      // detect on every N-th pixel (2: 320x240 from 640x480)
   int block_size = 20;        // side of the seed blocks, pixels at working resolution
-  double threshold_m = 0.01;  // largest point-to-plane distance at 1 m
-  // Depth error model: the threshold grows by a * z^2. OpenCV suggests 0.0075 for a Kinect,
-  // which merged the floor with the foot of walls at 2.5 m here (offsets off by 4 cm); 0.001
-  // kept every office plane within 7 mm.
-  double sensor_error_a = 0.001;
+  // Disparity is measured in pixels of a Kinect-like stereo pair (focal length fx of the
+  // frame, baseline below); the Kinect v1 quantises it in steps of 1/8 pixel.
+  double baseline_m = 0.075;
+  // Largest disparity distance of a pixel from its region's plane, and largest RMS of a seed
+  // block; 0.2 px is 5 mm at 1 m and 4.6 cm at 3 m, where depth steps are 2.9 cm.
+  double threshold_px = 0.2;
+  // After the 3-D refit, pixels whose disparity is farther than this from the refitted plane
+  // leave the region (the foot of a wall grown into the floor, say).
+  double refit_threshold_px = 0.15;
   int min_pixels = 1200;  // smallest region, pixels at working resolution
   double min_depth_m = 0.3;
   double max_depth_m = 4.0;
