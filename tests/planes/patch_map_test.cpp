@@ -79,5 +79,131 @@ TEST(PatchMap, RegionsOfARenderedPlaneBecomeWorldPoints) {
   EXPECT_LT(worst, 0.003);  // millimetre depth rounding at about 2 m
 }
 
+// Finalization on a synthetic sequence: a table top grows by 10 cm per frame for 20 frames,
+// then stays the same while in view. With 10 stable frames it is finalized exactly when its
+// area has not grown for 10 frames in view.
+PatchMapConfig lifecycleConfig() {
+  PatchMapConfig config;
+  config.stable_frames = 10;
+  config.max_growth = 0.02;
+  config.out_of_view_frames = 15;
+  config.min_area_m2 = 0.1;
+  return config;
+}
+
+std::vector<PatchEvent> finalizations(const std::vector<PatchEvent>& events) {
+  std::vector<PatchEvent> out;
+  for (const auto& e : events) {
+    if (e.kind == PatchEvent::Kind::kFinalized) out.push_back(e);
+  }
+  return out;
+}
+
+TEST(PatchLifecycle, AGrowingPatchIsFinalizedOnceItStopsGrowing) {
+  PatchMap map(lifecycleConfig());
+  long finalized_at = -1;
+  for (long frame = 0; frame < 60; ++frame) {
+    const double length = 0.5 + 0.1 * static_cast<double>(std::min(frame, 19L));
+    map.add({strip(0.0, length, 0.0, 0.8, 0.75)});
+    const auto events = finalizations(map.endFrame(frame));
+    if (!events.empty() && finalized_at < 0) finalized_at = frame;
+    EXPECT_LE(events.size(), 1u);
+  }
+  // Last growth at frame 19; ten frames later its area has not grown over ten frames in view.
+  EXPECT_EQ(finalized_at, 29);
+  EXPECT_EQ(map.finalizedCount(), 1u);
+  EXPECT_EQ(map.liveCount(), 0u);
+  EXPECT_EQ(map.patches().front().version, 1);
+}
+
+TEST(PatchLifecycle, APatchOutOfViewIsFinalizedAfterTheConfiguredFrames) {
+  PatchMap map(lifecycleConfig());
+  map.add({strip(0.0, 1.0, 0.0, 1.0, 0.75)});
+  EXPECT_TRUE(map.endFrame(0).empty());
+  for (long frame = 1; frame < 15; ++frame) EXPECT_TRUE(map.endFrame(frame).empty());
+  const auto events = finalizations(map.endFrame(15));
+  ASSERT_EQ(events.size(), 1u);
+  EXPECT_EQ(events.front().version, 1);
+}
+
+TEST(PatchLifecycle, APatchThatGrowsAfterFinalizationGetsANewVersionNotADuplicate) {
+  PatchMap map(lifecycleConfig());
+  long frame = 0;
+  for (; frame < 12; ++frame) {
+    map.add({strip(0.0, 1.0, 0.0, 1.0, 0.75)});
+    map.endFrame(frame);
+  }
+  ASSERT_EQ(map.patches().front().version, 1);
+  const int id = map.patches().front().id;
+  // The robot comes back and sees the table's other half.
+  std::vector<PatchEvent> later;
+  for (long end = frame + 12; frame < end; ++frame) {
+    map.add({strip(0.5, 2.0, 0.0, 1.0, 0.75)});
+    for (const auto& e : finalizations(map.endFrame(frame))) later.push_back(e);
+  }
+  ASSERT_EQ(map.patches().size(), 1u);
+  ASSERT_EQ(later.size(), 1u);
+  EXPECT_EQ(later.front().id, id);
+  EXPECT_EQ(later.front().version, 2);
+  EXPECT_NEAR(map.areaM2(map.patches().front()), 2.0, 0.2);
+}
+
+TEST(PatchLifecycle, AFinalizedPatchMergedIntoAnotherIsRetired) {
+  PatchMap map(lifecycleConfig());
+  for (long frame = 0; frame < 12; ++frame) {
+    map.add({strip(0.0, 0.6, 0.0, 0.8, 0.75), strip(1.4, 2.0, 0.0, 0.8, 0.75)});
+    map.endFrame(frame);
+  }
+  ASSERT_EQ(map.finalizedCount(), 2u);
+  map.add({strip(0.5, 1.5, 0.0, 0.8, 0.75)});
+  const auto events = map.endFrame(12);
+  ASSERT_EQ(events.size(), 1u);
+  EXPECT_EQ(events.front().kind, PatchEvent::Kind::kRetired);
+  EXPECT_EQ(events.front().id, 1);
+  EXPECT_EQ(map.patches().size(), 1u);
+  EXPECT_EQ(map.liveCount(), 1u);  // the joined table grew: it will be finalized again
+  const auto last = finalizations(map.finalizeAll());
+  ASSERT_EQ(last.size(), 1u);
+  EXPECT_EQ(last.front().id, 0);
+  EXPECT_EQ(last.front().version, 2);
+}
+
+TEST(PatchLifecycle, TinyPatchesAreNeverFinalized) {
+  PatchMap map(lifecycleConfig());
+  map.add({strip(0.0, 0.2, 0.0, 0.2, 0.75)});  // 0.04 m^2
+  for (long frame = 0; frame < 40; ++frame) EXPECT_TRUE(map.endFrame(frame).empty());
+  EXPECT_TRUE(map.finalizeAll().empty());
+}
+
+// Colour samples of a rendered checkerboard plane carry the board's colour at their position,
+// and each 5 mm cell holds at most two of them.
+TEST(PatchColours, SamplesFromAFrameMatchTheColourOnThePlane) {
+  const Eigen::Vector3d n = Eigen::Vector3d(0.1, -0.2, -1.0).normalized();
+  const core::Isometry T_W_C = core::Isometry::Identity();
+  const double d = n.dot(Eigen::Vector3d(0.0, 0.0, 1.5));
+  const core::Frame frame = test::renderPlane(test::kinectIntrinsics(), T_W_C, n, d);
+  const PlaneDetection detection = PlaneDetector(PlaneDetectorConfig{}).detect(frame);
+  PatchMap map(PatchMapConfig{});
+  const auto ids = map.add(observationsOf(frame, detection, T_W_C));
+  map.addColours(frame, detection, T_W_C, ids);
+  ASSERT_EQ(map.patches().size(), 1u);
+  const Patch& patch = map.patches().front();
+  const auto samples = patch.samples.all();
+  ASSERT_GT(samples.size(), 100000u);
+  // 5 mm cells over the patch's area, two samples each, bound the count and the memory.
+  EXPECT_LE(static_cast<double>(samples.size()), 2.0 * 1.2 * map.areaM2(patch) / 25e-6);
+  std::size_t matching = 0;
+  for (const ColourSample& s : samples) {
+    const Eigen::Vector3d X = patch.origin + s.u * patch.u_axis + s.v * patch.v_axis;
+    const long parity = static_cast<long>(std::floor(X.x() * 10)) +
+                        static_cast<long>(std::floor(X.y() * 10)) +
+                        static_cast<long>(std::floor(X.z() * 10));
+    const std::uint8_t expected = parity % 2 != 0 ? 40 : 220;
+    if (s.rgb[0] == expected) ++matching;
+  }
+  // Only samples within a few millimetres of a square's edge may disagree.
+  EXPECT_GT(static_cast<double>(matching), 0.97 * static_cast<double>(samples.size()));
+}
+
 }  // namespace
 }  // namespace tessera::planes

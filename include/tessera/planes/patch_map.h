@@ -2,7 +2,11 @@
 // The global set of planar patches: detected regions are associated with the patches they
 // continue (same plane within bounds, and touching what the patch already covers), patches
 // found to be one plane are merged, and each patch's plane is refitted from all its points.
+// Each patch collects colour samples from the raw frames and is finalized once it stops
+// growing or leaves the view; a finalized patch that grows again is finalized anew as a
+// higher version of the same id.
 #include <cstddef>
+#include <deque>
 #include <set>
 #include <utility>
 #include <vector>
@@ -11,6 +15,8 @@
 
 #include "tessera/core/frame.h"
 #include "tessera/core/pose.h"
+#include "tessera/planes/colour_samples.h"
+#include "tessera/planes/patch_outline.h"
 #include "tessera/planes/plane_detector.h"
 #include "tessera/planes/plane_fit.h"
 
@@ -20,6 +26,16 @@ struct PatchMapConfig {
   double max_normal_angle_deg = 5.0;  // a region continues a patch only this close in normal
   double max_offset_m = 0.03;         // ... and with its centroid this close to the plane
   double cell_m = 0.05;               // occupancy grid cell in the plane
+  // Finalization: a patch in view is stable once its area grew by at most max_growth (a
+  // fraction) over its last stable_frames frames in view; a patch not seen for
+  // out_of_view_frames frames is finalized as it is. Patches under min_area_m2 never are.
+  int stable_frames = 30;
+  double max_growth = 0.02;
+  int out_of_view_frames = 60;
+  double min_area_m2 = 0.1;
+  // Colour samples: at most samples_per_cell in each sample_cell_m square of the plane.
+  double sample_cell_m = 0.005;
+  int samples_per_cell = 2;
 };
 
 // One detected region in world coordinates.
@@ -32,8 +48,6 @@ std::vector<PlaneObservation> observationsOf(const core::Frame& frame,
                                              const PlaneDetection& detection,
                                              const core::Isometry& T_W_C);
 
-using Cell = std::pair<int, int>;
-
 struct Patch {
   int id = 0;
   Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();  // n . X = offset
@@ -44,9 +58,26 @@ struct Patch {
   Eigen::Vector3d v_axis = Eigen::Vector3d::UnitY();
   std::set<Cell> cells;
   PointMoments moments;  // of every point ever added, for the least-squares refit
+  ColourSamples samples{0.005, 2};
+
+  // Finalization state.
+  int version = 0;  // 0: never finalized; each finalization adds one
+  bool finalized = false;
+  double finalized_area_m2 = 0.0;
+  std::deque<double> area_in_view;  // area after each of the last frames the patch was seen in
+  long last_seen_frame = -1;
 
   Cell cellOf(const Eigen::Vector3d& X_W, double cell_m) const;
   Eigen::Vector3d cellCentre(const Cell& cell, double cell_m) const;
+};
+
+// What changed for downstream stages: a patch (re)finalized as `version`, or a patch that was
+// finalized before and has since been merged into another (its id is gone).
+struct PatchEvent {
+  enum class Kind { kFinalized, kRetired };
+  Kind kind;
+  int id;
+  int version;
 };
 
 class PatchMap {
@@ -55,6 +86,23 @@ class PatchMap {
 
   // Adds one frame's regions; returns, per region, the id of the patch it went to.
   std::vector<int> add(const std::vector<PlaneObservation>& observations);
+
+  // Colours of the frame's pixels in the regions that went to patches `ids` (as add returned
+  // them): each pixel's ray meets its patch's plane, weighted by |cos| of the viewing angle
+  // over the squared distance. Needs rgb registered to depth.
+  void addColours(const core::Frame& frame, const PlaneDetection& detection,
+                  const core::Isometry& T_W_C, const std::vector<int>& ids);
+
+  // Closes frame `frame_index` (patches seen in it are the ones add() touched since the last
+  // call) and returns the finalizations and retirements it caused.
+  std::vector<PatchEvent> endFrame(long frame_index);
+  // At the end of the stream: finalizes every patch not finalized, above the area bound.
+  std::vector<PatchEvent> finalizeAll();
+
+  const Patch* find(int id) const;
+  std::size_t liveCount() const;       // not finalized in their current state
+  std::size_t finalizedCount() const;  // finalized, in their current version
+  Outline outlineOf(const Patch& patch) const { return traceOutline(patch.cells, config_.cell_m); }
 
   const std::vector<Patch>& patches() const { return patches_; }
   // Area covered by a patch's occupied cells, m^2.
@@ -67,9 +115,12 @@ class PatchMap {
   void addObservation(Patch& patch, const std::vector<Eigen::Vector3d>& points,
                       const PointMoments& moments) const;
   static void refit(Patch& patch);
+  void finalize(Patch& patch, std::vector<PatchEvent>& events) const;
 
   PatchMapConfig config_;
   std::vector<Patch> patches_;
+  std::set<int> seen_this_frame_;
+  std::vector<PatchEvent> pending_;  // retirements from merges, reported by endFrame
   int next_id_ = 0;
 };
 

@@ -1,0 +1,40 @@
+#pragma once
+// Colour samples of one patch, taken from the raw frames, with bounded memory per square metre:
+// the plane is cut into small cells and each cell keeps only its best-weighted few samples.
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <unordered_map>
+#include <vector>
+
+namespace tessera::planes {
+
+struct ColourSample {
+  float u = 0.0F, v = 0.0F;  // position in the patch's plane frame, metres
+  std::array<std::uint8_t, 3> rgb{};
+  float weight = 0.0F;  // 0: an empty slot
+};
+
+class ColourSamples {
+ public:
+  // At most `per_cell` samples in each `cell_m` x `cell_m` cell of the plane.
+  ColourSamples(double cell_m, int per_cell);
+
+  // Keeps the sample if its cell has a free slot or a lighter sample, which it replaces.
+  void add(const ColourSample& sample);
+
+  std::size_t size() const { return size_; }
+  std::size_t bytes() const;
+  std::vector<ColourSample> all() const;
+
+ private:
+  static constexpr int kTileCells = 32;  // tiles of 32 x 32 cells are allocated as touched
+  std::vector<ColourSample>& tileAt(int tile_u, int tile_v);
+
+  double cell_m_;
+  int per_cell_;
+  std::unordered_map<std::int64_t, std::vector<ColourSample>> tiles_;
+  std::size_t size_ = 0;
+};
+
+}  // namespace tessera::planes
