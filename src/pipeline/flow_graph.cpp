@@ -15,7 +15,7 @@ int defaultThreadCount() {
 }
 
 void runGraph(SourceStage& source, TrackingStage& tracking, IntegrationStage& integration,
-              StatsSink& sink, const GraphOptions& options) {
+              PlaneStage& planes, StatsSink& sink, const GraphOptions& options) {
   const int threads = options.threads > 0 ? options.threads : defaultThreadCount();
   oneapi::tbb::task_arena arena(threads);
   arena.execute([&] {
@@ -32,12 +32,15 @@ void runGraph(SourceStage& source, TrackingStage& tracking, IntegrationStage& in
     // Replay: never drop a frame; hold the source back instead.
     flow::limiter_node<core::Frame> limiter(graph,
                                             static_cast<std::size_t>(options.max_frames_in_flight));
-    // Two serial stages in a row: while frame N is integrated, frame N+1 is tracked.
+    // Serial stages in a row: while frame N is integrated, frame N+1 is tracked and frame N-1
+    // goes through plane detection.
     flow::function_node<core::Frame, TrackedFrame> tracking_node(
         graph, flow::serial, [&](core::Frame frame) { return tracking.process(std::move(frame)); });
     flow::function_node<TrackedFrame, FusedFrame> integration_node(
         graph, flow::serial,
         [&](TrackedFrame tracked) { return integration.process(std::move(tracked)); });
+    flow::function_node<FusedFrame, FusedFrame> planes_node(
+        graph, flow::serial, [&](FusedFrame fused) { return planes.process(std::move(fused)); });
     flow::function_node<FusedFrame, flow::continue_msg> sink_node(graph, flow::serial,
                                                                   [&](const FusedFrame& fused) {
                                                                     sink.process(fused);
@@ -47,13 +50,15 @@ void runGraph(SourceStage& source, TrackingStage& tracking, IntegrationStage& in
     flow::make_edge(source_node, limiter);
     flow::make_edge(limiter, tracking_node);
     flow::make_edge(tracking_node, integration_node);
-    flow::make_edge(integration_node, sink_node);
+    flow::make_edge(integration_node, planes_node);
+    flow::make_edge(planes_node, sink_node);
     flow::make_edge(sink_node, limiter.decrementer());
 
     source_node.activate();
     graph.wait_for_all();
   });
   // End of stream: flush in topological order.
+  sink.writePatchEvents(planes.finish());
   sink.flush();
 }
 

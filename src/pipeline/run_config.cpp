@@ -1,6 +1,7 @@
 #include "tessera/pipeline/run_config.h"
 
 #include "tessera/core/error.h"
+#include "tessera/planes/planes_config.h"
 
 namespace tessera::pipeline {
 
@@ -18,6 +19,8 @@ RunConfig readRunConfig(const core::ConfigDocument& doc) {
     readConfig(root.section("pipeline"), config.pipeline);
     fusion::readConfig(root.section("tracker"), config.tracker);
     fusion::readConfig(root.section("tsdf"), config.tsdf);
+    planes::readConfig(root.section("planes"), config.planes);
+    planes::readConfig(root.section("patches"), config.patches);
   } catch (const core::ConfigError& e) {
     const std::string message = e.what();
     // Range checks inside the stages do not know the file; add it.

@@ -116,6 +116,48 @@ FusedFrame IntegrationStage::process(TrackedFrame tracked) {
   return fused;
 }
 
+PlaneStage::PlaneStage(const planes::PlaneDetectorConfig& detector,
+                       const planes::PatchMapConfig& patches)
+    : detector_(detector), map_(patches) {}
+
+void PlaneStage::count(const std::vector<planes::PatchEvent>& events) {
+  for (const planes::PatchEvent& event : events) {
+    (event.kind == planes::PatchEvent::Kind::kFinalized ? finalizations_ : retirements_)++;
+  }
+}
+
+FusedFrame PlaneStage::process(FusedFrame fused) {
+  {
+    ScopedStageTime time(timer_);
+    try {
+      if (fused.integrated && fused.T_W_C) {
+        const planes::PlaneDetection detection = detector_.detect(fused.frame);
+        fused.planes_detected = detection.planes.size();
+        const std::vector<int> ids =
+            map_.add(planes::observationsOf(fused.frame, detection, *fused.T_W_C));
+        if (fused.frame.index % static_cast<std::uint64_t>(map_.config().colour_every_n_frames) ==
+            0) {
+          map_.addColours(fused.frame, detection, *fused.T_W_C, ids);
+        }
+      }
+    } catch (const core::Error& e) {
+      spdlog::warn("plane detection skipped {}", e.what());
+    }
+    fused.patch_events = map_.endFrame(static_cast<long>(fused.frame.index));
+  }
+  count(fused.patch_events);
+  fused.planes_ms = timer_.lastMs();
+  fused.patches_live = map_.liveCount();
+  fused.patches_finalized = map_.finalizedCount();
+  return fused;
+}
+
+std::vector<planes::PatchEvent> PlaneStage::finish() {
+  std::vector<planes::PatchEvent> events = map_.finalizeAll();
+  count(events);
+  return events;
+}
+
 StatsSink::StatsSink(const std::filesystem::path& out_dir, std::optional<std::size_t> frames_total,
                      ProgressCallback on_progress)
     : stats_path_(out_dir / "stats.jsonl"),
@@ -152,10 +194,14 @@ void StatsSink::process(const FusedFrame& fused) {
                            {"tsdf_bytes", fused.tsdf_bytes},
                            {"tsdf_blocks_released", fused.tsdf_blocks_released},
                            {"map_bytes", map_bytes_},
-                           {"patches_finalized", 0},
+                           {"planes_ms", fused.planes_ms},
+                           {"planes_detected", fused.planes_detected},
+                           {"patches_live", fused.patches_live},
+                           {"patches_finalized", fused.patches_finalized},
                            {"textures_stored", 0}};
     if (!fused.integrated) line["skip_reason"] = fused.skip_reason;
     stats_ << line.dump() << '\n';
+    writePatchEvents(fused.patch_events);
     if (fused.T_W_C) trajectory_ << eval::tumLine(fused.frame.timestamp_ns, *fused.T_W_C);
     if (!stats_ || !trajectory_) {
       write_failed_ = true;
@@ -164,6 +210,19 @@ void StatsSink::process(const FusedFrame& fused) {
     }
   }
   if (on_progress_) on_progress_({frames_done_, frames_total_, elapsed_s, map_bytes_});
+}
+
+void StatsSink::writePatchEvents(const std::vector<planes::PatchEvent>& events) {
+  for (const planes::PatchEvent& event : events) {
+    const bool finalized = event.kind == planes::PatchEvent::Kind::kFinalized;
+    nlohmann::json line = {{"type", "patch"},
+                           {"event", finalized ? "finalized" : "retired"},
+                           {"id", event.id},
+                           {"version", event.version},
+                           {"frames_done", frames_done_}};
+    if (finalized) line["area_m2"] = event.area_m2;
+    stats_ << line.dump() << '\n';
+  }
 }
 
 void StatsSink::flush() {

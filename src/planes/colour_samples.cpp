@@ -6,28 +6,56 @@
 namespace tessera::planes {
 
 ColourSamples::ColourSamples(double cell_m, int per_cell)
-    : cell_m_(cell_m), per_cell_(std::max(1, per_cell)) {}
+    : cell_m_(cell_m),
+      inverse_cell_(static_cast<float>(1.0 / cell_m)),
+      per_cell_(std::max(1, per_cell)) {}
+
+ColourSamples& ColourSamples::operator=(const ColourSamples& other) {
+  cell_m_ = other.cell_m_;
+  inverse_cell_ = other.inverse_cell_;
+  per_cell_ = other.per_cell_;
+  tiles_ = other.tiles_;
+  size_ = other.size_;
+  last_tile_ = nullptr;  // it pointed into the other object's tiles
+  return *this;
+}
+
+ColourSamples& ColourSamples::operator=(ColourSamples&& other) noexcept {
+  cell_m_ = other.cell_m_;
+  inverse_cell_ = other.inverse_cell_;
+  per_cell_ = other.per_cell_;
+  tiles_ = std::move(other.tiles_);
+  size_ = other.size_;
+  last_tile_ = nullptr;
+  other.tiles_.clear();
+  other.size_ = 0;
+  other.last_tile_ = nullptr;
+  return *this;
+}
 
 std::vector<ColourSample>& ColourSamples::tileAt(int tile_u, int tile_v) {
   const std::int64_t key =
       (static_cast<std::int64_t>(tile_u) << 32) ^ static_cast<std::uint32_t>(tile_v);
+  if (last_tile_ != nullptr && key == last_key_) return *last_tile_;
   auto [it, inserted] = tiles_.try_emplace(key);
   if (inserted) it->second.resize(static_cast<std::size_t>(kTileCells * kTileCells * per_cell_));
+  last_key_ = key;
+  last_tile_ = &it->second;
   return it->second;
 }
 
 void ColourSamples::add(const ColourSample& sample) {
-  const int cu = static_cast<int>(std::floor(sample.u / cell_m_));
-  const int cv = static_cast<int>(std::floor(sample.v / cell_m_));
-  // Floor division, so negative cells land in the right tile.
-  const int tu = cu >= 0 ? cu / kTileCells : (cu + 1) / kTileCells - 1;
-  const int tv = cv >= 0 ? cv / kTileCells : (cv + 1) / kTileCells - 1;
-  std::vector<ColourSample>& tile = tileAt(tu, tv);
-  const int cell = (cv - tv * kTileCells) * kTileCells + (cu - tu * kTileCells);
-  const auto first = tile.begin() + static_cast<std::ptrdiff_t>(cell * per_cell_);
-  const auto lightest = std::min_element(
-      first, first + per_cell_,
-      [](const ColourSample& a, const ColourSample& b) { return a.weight < b.weight; });
+  const int cu = static_cast<int>(std::floor(sample.u * inverse_cell_));
+  const int cv = static_cast<int>(std::floor(sample.v * inverse_cell_));
+  // kTileCells is 32: an arithmetic shift is a floor division, so negative cells land in the
+  // right tile, and the low bits are the cell within it.
+  static_assert(kTileCells == 32);
+  std::vector<ColourSample>& tile = tileAt(cu >> 5, cv >> 5);
+  ColourSample* slots = tile.data() + ((cv & 31) * kTileCells + (cu & 31)) * per_cell_;
+  ColourSample* lightest = slots;
+  for (int i = 1; i < per_cell_; ++i) {
+    if (slots[i].weight < lightest->weight) lightest = slots + i;
+  }
   if (lightest->weight >= sample.weight) return;
   if (lightest->weight == 0.0F) ++size_;
   *lightest = sample;

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include <Eigen/Geometry>
 
@@ -26,6 +27,14 @@ std::vector<PlaneObservation> observationsOf(const core::Frame& frame,
   return observations;
 }
 
+Patch::Frame Patch::planeFrame() const {
+  Frame frame;
+  frame.origin = origin + (offset - normal.dot(origin)) * normal;
+  frame.u_axis = (u_axis - u_axis.dot(normal) * normal).normalized();
+  frame.v_axis = normal.cross(frame.u_axis);
+  return frame;
+}
+
 Cell Patch::cellOf(const Eigen::Vector3d& X_W, double cell_m) const {
   const Eigen::Vector3d d = X_W - origin;
   return {static_cast<int>(std::floor(d.dot(u_axis) / cell_m)),
@@ -40,16 +49,23 @@ double PatchMap::areaM2(const Patch& patch) const {
   return static_cast<double>(patch.cells.size()) * config_.cell_m * config_.cell_m;
 }
 
-bool PatchMap::continues(const Patch& patch, const Eigen::Vector3d& normal, double offset,
+bool PatchMap::continues(const Patch& patch, const PlaneFit& region,
                          const std::vector<Eigen::Vector3d>& points) const {
   // Planes are compared as unoriented: a region seen from the other side is the same plane.
-  const double cos_angle = std::abs(patch.normal.dot(normal));
+  const double cos_angle = std::abs(patch.normal.dot(region.normal));
   if (cos_angle < std::cos(config_.max_normal_angle_deg * M_PI / 180.0)) return false;
-  const double sign = patch.normal.dot(normal) < 0.0 ? -1.0 : 1.0;
-  if (std::abs(sign * offset - patch.offset) > config_.max_offset_m) return false;
-  // Touching: a point falls in or next to an occupied cell.
+  // The region's centroid must lie near the patch's plane. (Comparing plane offsets instead
+  // would magnify a small tilt by the distance from the world origin.)
+  if (std::abs(patch.normal.dot(region.centroid) - patch.offset) > config_.max_offset_m) {
+    return false;
+  }
+  // Touching: a point falls in or next to an occupied cell. Points come in raster order, so
+  // a point in the same cell as the one before adds nothing.
+  Cell last{std::numeric_limits<int>::min(), 0};
   for (const auto& X : points) {
     const Cell c = patch.cellOf(X, config_.cell_m);
+    if (c == last) continue;
+    last = c;
     for (int du = -1; du <= 1; ++du) {
       for (int dv = -1; dv <= 1; ++dv) {
         if (patch.cells.count({c.first + du, c.second + dv}) > 0) return true;
@@ -61,7 +77,12 @@ bool PatchMap::continues(const Patch& patch, const Eigen::Vector3d& normal, doub
 
 void PatchMap::addObservation(Patch& patch, const std::vector<Eigen::Vector3d>& points,
                               const PointMoments& moments) const {
-  for (const auto& X : points) patch.cells.insert(patch.cellOf(X, config_.cell_m));
+  Cell last{std::numeric_limits<int>::min(), 0};
+  for (const auto& X : points) {
+    const Cell c = patch.cellOf(X, config_.cell_m);
+    if (c != last) patch.cells.insert(c);
+    last = c;
+  }
   patch.moments.add(moments);
   refit(patch);
 }
@@ -101,7 +122,7 @@ std::vector<int> PatchMap::add(const std::vector<PlaneObservation>& observations
     const PlaneFit plane = fitPlane(moments);
     std::vector<std::size_t> matches;
     for (std::size_t i = 0; i < patches_.size(); ++i) {
-      if (continues(patches_[i], plane.normal, plane.offset, observation.points_W)) {
+      if (continues(patches_[i], plane, observation.points_W)) {
         matches.push_back(i);
       }
     }
@@ -148,35 +169,50 @@ void PatchMap::addColours(const core::Frame& frame, const PlaneDetection& detect
       frame.rgb.rows != k.height) {
     return;  // colour not registered pixel for pixel to depth
   }
-  std::vector<Patch*> patch_of_label;
-  for (const int id : ids) {
+  // Per region, its patch's plane in the camera frame (n_C . X_C = d_C) and the camera-frame
+  // position and axes of the patch's (u, v) frame, so each pixel costs a few multiplies.
+  struct Target {
+    ColourSamples* samples = nullptr;
+    Eigen::Vector3f n_C, origin_C, u_C, v_C;
+    float d_C = 0.0F;
+  };
+  const core::Isometry T_C_W = T_W_C.inverse();
+  std::vector<Target> targets(ids.size());
+  for (std::size_t r = 0; r < ids.size(); ++r) {
     auto it = std::find_if(patches_.begin(), patches_.end(),
-                           [id](const Patch& p) { return p.id == id; });
-    patch_of_label.push_back(it == patches_.end() ? nullptr : &*it);
+                           [&](const Patch& p) { return p.id == ids[r]; });
+    if (it == patches_.end()) continue;
+    Target& target = targets[r];
+    target.samples = &it->samples;
+    target.n_C = (T_C_W.linear() * it->normal).cast<float>();
+    target.d_C = static_cast<float>(it->offset - it->normal.dot(T_W_C.translation()));
+    target.origin_C = (T_C_W * it->origin).cast<float>();
+    target.u_C = (T_C_W.linear() * it->u_axis).cast<float>();
+    target.v_C = (T_C_W.linear() * it->v_axis).cast<float>();
   }
-  const Eigen::Matrix3d R = T_W_C.linear();
-  const Eigen::Vector3d o = T_W_C.translation();
   const int scale = detection.scale;
   for (int y = 0; y < frame.rgb.rows; ++y) {
     const auto* label = detection.labels.ptr<std::uint8_t>(y / scale);
     const auto* rgb = frame.rgb.ptr<cv::Vec3b>(y);
+    const float ray_y = static_cast<float>((y - k.cy) / k.fy);
     for (int x = 0; x < frame.rgb.cols; ++x) {
       const std::uint8_t l = label[x / scale];
-      if (l >= patch_of_label.size() || patch_of_label[l] == nullptr) continue;
-      Patch& patch = *patch_of_label[l];
-      const Eigen::Vector3d ray = R * Eigen::Vector3d((x - k.cx) / k.fx, (y - k.cy) / k.fy, 1.0);
-      const double along = patch.normal.dot(ray);
-      if (std::abs(along) < 1e-6) continue;
-      const double t = (patch.offset - patch.normal.dot(o)) / along;  // ray meets plane
-      if (t <= 0.0) continue;
-      const Eigen::Vector3d X = o + t * ray;
-      const double distance = t * ray.norm();
+      if (l >= targets.size() || targets[l].samples == nullptr) continue;
+      const Target& target = targets[l];
+      const Eigen::Vector3f ray(static_cast<float>((x - k.cx) / k.fx), ray_y, 1.0F);
+      const float along = target.n_C.dot(ray);
+      if (std::abs(along) < 1e-6F) continue;
+      const float z = target.d_C / along;  // the ray meets the plane at depth z
+      if (z <= 0.0F) continue;
+      const Eigen::Vector3f offset = z * ray - target.origin_C;
+      const float ray_norm = ray.norm();
+      const float distance = z * ray_norm;
       ColourSample sample;
-      sample.u = static_cast<float>((X - patch.origin).dot(patch.u_axis));
-      sample.v = static_cast<float>((X - patch.origin).dot(patch.v_axis));
+      sample.u = offset.dot(target.u_C);
+      sample.v = offset.dot(target.v_C);
       sample.rgb = {rgb[x][0], rgb[x][1], rgb[x][2]};
-      sample.weight = static_cast<float>(std::abs(along) / ray.norm() / (distance * distance));
-      patch.samples.add(sample);
+      sample.weight = std::abs(along) / ray_norm / (distance * distance);
+      target.samples->add(sample);
     }
   }
 }
@@ -185,7 +221,8 @@ void PatchMap::finalize(Patch& patch, std::vector<PatchEvent>& events) const {
   patch.version += 1;
   patch.finalized = true;
   patch.finalized_area_m2 = areaM2(patch);
-  events.push_back({PatchEvent::Kind::kFinalized, patch.id, patch.version});
+  events.push_back(
+      {PatchEvent::Kind::kFinalized, patch.id, patch.version, patch.finalized_area_m2});
 }
 
 std::vector<PatchEvent> PatchMap::endFrame(long frame_index) {

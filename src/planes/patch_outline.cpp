@@ -39,7 +39,7 @@ double polygonArea(const Polygon2& polygon) {
   return std::abs(twice) / 2.0;
 }
 
-Outline traceOutline(const std::set<Cell>& cells, double cell_m) {
+Outline traceOutline(const CellSet& cells, double cell_m) {
   Outline outline;
   if (cells.empty()) return outline;
   int min_i = std::numeric_limits<int>::max(), min_j = min_i;
@@ -58,6 +58,8 @@ Outline traceOutline(const std::set<Cell>& cells, double cell_m) {
   cv::morphologyEx(grid, grid, cv::MORPH_CLOSE, cv::Mat::ones(3, 3, CV_8UC1), cv::Point(-1, -1),
                    1, cv::BORDER_CONSTANT, cv::Scalar(0));
   outline.area_m2 = cv::countNonZero(grid) * cell_m * cell_m;
+  outline.grid = grid;
+  outline.first_cell = {min_i - kBorder, min_j - kBorder};
 
   cv::Mat fine;
   cv::resize(grid, fine, cv::Size(), kUpsample, kUpsample, cv::INTER_NEAREST);

@@ -228,6 +228,24 @@ TEST(RunConfig, DefaultYamlDocumentsEveryKeyWithTheStructDefaults) {
   EXPECT_EQ(from_file.tracker.max_depth_difference_m, defaults.tracker.max_depth_difference_m);
   EXPECT_EQ(from_file.tracker.lost_frames_before_restart,
             defaults.tracker.lost_frames_before_restart);
+  EXPECT_EQ(from_file.planes.working_scale, defaults.planes.working_scale);
+  EXPECT_EQ(from_file.planes.block_size, defaults.planes.block_size);
+  EXPECT_EQ(from_file.planes.baseline_m, defaults.planes.baseline_m);
+  EXPECT_EQ(from_file.planes.threshold_px, defaults.planes.threshold_px);
+  EXPECT_EQ(from_file.planes.refit_threshold_px, defaults.planes.refit_threshold_px);
+  EXPECT_EQ(from_file.planes.min_pixels, defaults.planes.min_pixels);
+  EXPECT_EQ(from_file.planes.min_depth_m, defaults.planes.min_depth_m);
+  EXPECT_EQ(from_file.planes.max_depth_m, defaults.planes.max_depth_m);
+  EXPECT_EQ(from_file.patches.max_normal_angle_deg, defaults.patches.max_normal_angle_deg);
+  EXPECT_EQ(from_file.patches.max_offset_m, defaults.patches.max_offset_m);
+  EXPECT_EQ(from_file.patches.cell_m, defaults.patches.cell_m);
+  EXPECT_EQ(from_file.patches.stable_frames, defaults.patches.stable_frames);
+  EXPECT_EQ(from_file.patches.max_growth, defaults.patches.max_growth);
+  EXPECT_EQ(from_file.patches.out_of_view_frames, defaults.patches.out_of_view_frames);
+  EXPECT_EQ(from_file.patches.min_area_m2, defaults.patches.min_area_m2);
+  EXPECT_EQ(from_file.patches.sample_cell_m, defaults.patches.sample_cell_m);
+  EXPECT_EQ(from_file.patches.samples_per_cell, defaults.patches.samples_per_cell);
+  EXPECT_EQ(from_file.patches.colour_every_n_frames, defaults.patches.colour_every_n_frames);
 }
 
 TEST(RunConfig, MisspelledKeyAndBadRangeNameTheFile) {

@@ -6,8 +6,8 @@ namespace tessera::planes {
 namespace {
 
 // An L of 2 m x 1 m plus 1 m x 1 m in 5 cm cells, with a 30 cm square hole in its long arm.
-std::set<Cell> lShapeWithHole() {
-  std::set<Cell> cells;
+CellSet lShapeWithHole() {
+  CellSet cells;
   for (int i = 0; i < 40; ++i) {
     for (int j = 0; j < 20; ++j) {
       const bool hole = i >= 10 && i < 16 && j >= 8 && j < 14;
@@ -42,7 +42,7 @@ TEST(PatchOutline, AnLShapeWithAHoleGivesOneOuterPolygonAndOneHole) {
 }
 
 TEST(PatchOutline, AOneCellGapIsClosedButTwoDistantPiecesStayTwoParts) {
-  std::set<Cell> cells;
+  CellSet cells;
   for (int i = 0; i < 20; ++i) {
     for (int j = 0; j < 10; ++j) {
       if (i != 7 || j != 4) cells.insert({i, j});     // a missing cell inside

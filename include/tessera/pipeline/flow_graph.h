@@ -1,6 +1,6 @@
 #pragma once
 // The one place that knows the topology: source -> limiter -> tracking -> integration ->
-// stats sink, as a tbb::flow::graph inside a task_arena of the requested concurrency.
+// planes -> stats sink, as a tbb::flow::graph inside a task_arena of the requested concurrency.
 #include "tessera/pipeline/stages.h"
 
 namespace tessera::pipeline {
@@ -13,7 +13,7 @@ struct GraphOptions {
 // Runs the stages over the whole stream, then flushes them in order (end of stream).
 // Blocks until done.
 void runGraph(SourceStage& source, TrackingStage& tracking, IntegrationStage& integration,
-              StatsSink& sink, const GraphOptions& options);
+              PlaneStage& planes, StatsSink& sink, const GraphOptions& options);
 
 // Hardware threads, at least 1.
 int defaultThreadCount();

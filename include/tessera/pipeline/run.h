@@ -44,6 +44,11 @@ struct RunSummary {
   std::size_t tsdf_bytes = 0;
   std::size_t tsdf_blocks_released = 0;  // far behind the camera (tsdf.release_distance_m)
   std::size_t mesh_vertices = 0;
+  std::size_t patches_finalized = 0;     // in the map at the end (OUT/patches.obj)
+  std::size_t patch_finalizations = 0;   // every finalization, later versions included
+  std::size_t patches_retired = 0;       // finalized, then merged into another patch
+  std::size_t colour_samples = 0;        // held by all patches at the end
+  std::size_t colour_sample_bytes = 0;
   // ATE of the fused poses against the recording's ground truth, when it has one.
   std::optional<eval::AteResult> ate;
   std::vector<StageFigures> stages;

@@ -6,6 +6,8 @@
 #include "tessera/core/config.h"
 #include "tessera/fusion/tracker.h"
 #include "tessera/fusion/tsdf_map.h"
+#include "tessera/planes/patch_map.h"
+#include "tessera/planes/plane_detector.h"
 
 namespace tessera::pipeline {
 
@@ -19,6 +21,8 @@ struct RunConfig {
   PipelineConfig pipeline;
   fusion::TrackerConfig tracker;
   fusion::TsdfConfig tsdf;
+  planes::PlaneDetectorConfig planes;
+  planes::PatchMapConfig patches;
 };
 
 // Reads every section of `doc` into a RunConfig and rejects unknown keys.

@@ -15,6 +15,8 @@
 #include "tessera/fusion/tracker.h"
 #include "tessera/fusion/tsdf_map.h"
 #include "tessera/pipeline/stage_timer.h"
+#include "tessera/planes/patch_map.h"
+#include "tessera/planes/plane_detector.h"
 
 namespace tessera::pipeline {
 
@@ -65,6 +67,12 @@ struct FusedFrame {
   std::size_t tsdf_blocks_released = 0;  // this frame, far behind the camera
   double tracking_ms = 0.0;
   double integration_ms = 0.0;
+  // Filled by the plane stage.
+  double planes_ms = 0.0;
+  std::size_t planes_detected = 0;
+  std::size_t patches_live = 0;
+  std::size_t patches_finalized = 0;
+  std::vector<planes::PatchEvent> patch_events;
 };
 
 // Registers colour to depth and gives each frame its pose: tracked, or the ground truth. A
@@ -111,6 +119,31 @@ class IntegrationStage {
   StageTimer timer_;
 };
 
+// Finds the planar regions of each posed frame, grows the patch map with them and their
+// colours, and finalizes patches that stopped growing or left the view.
+class PlaneStage {
+ public:
+  PlaneStage(const planes::PlaneDetectorConfig& detector, const planes::PatchMapConfig& patches);
+
+  FusedFrame process(FusedFrame fused);
+  // End of stream: finalizes every remaining patch above the area bound.
+  std::vector<planes::PatchEvent> finish();
+
+  const planes::PatchMap& map() const { return map_; }
+  std::size_t finalizations() const { return finalizations_; }  // versions included
+  std::size_t retirements() const { return retirements_; }
+  const StageTimer& timer() const { return timer_; }
+
+ private:
+  void count(const std::vector<planes::PatchEvent>& events);
+
+  planes::PlaneDetector detector_;
+  planes::PatchMap map_;
+  std::size_t finalizations_ = 0;
+  std::size_t retirements_ = 0;
+  StageTimer timer_;
+};
+
 // What the sink tells a progress display after each frame.
 struct Progress {
   std::size_t frames_done = 0;
@@ -131,6 +164,8 @@ class StatsSink {
             ProgressCallback on_progress);
 
   void process(const FusedFrame& fused);
+  // One stats.jsonl line per patch event: {"type":"patch","event":"finalized"|"retired",...}.
+  void writePatchEvents(const std::vector<planes::PatchEvent>& events);
   // Closes the files; throws core::Error naming one whose writing failed (disk full).
   void flush();
 

@@ -5,6 +5,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <unordered_map>
+#include <utility>
 #include <vector>
 
 namespace tessera::planes {
@@ -19,6 +20,10 @@ class ColourSamples {
  public:
   // At most `per_cell` samples in each `cell_m` x `cell_m` cell of the plane.
   ColourSamples(double cell_m, int per_cell);
+  ColourSamples(const ColourSamples& other) { *this = other; }
+  ColourSamples& operator=(const ColourSamples& other);
+  ColourSamples(ColourSamples&& other) noexcept { *this = std::move(other); }
+  ColourSamples& operator=(ColourSamples&& other) noexcept;
 
   // Keeps the sample if its cell has a free slot or a lighter sample, which it replaces.
   void add(const ColourSample& sample);
@@ -32,9 +37,14 @@ class ColourSamples {
   std::vector<ColourSample>& tileAt(int tile_u, int tile_v);
 
   double cell_m_;
+  float inverse_cell_;
   int per_cell_;
   std::unordered_map<std::int64_t, std::vector<ColourSample>> tiles_;
   std::size_t size_ = 0;
+  // Neighbouring pixels mostly land in the same tile: remember the last one looked up
+  // (unordered_map elements keep their address when the map grows).
+  std::int64_t last_key_ = 0;
+  std::vector<ColourSample>* last_tile_ = nullptr;
 };
 
 }  // namespace tessera::planes

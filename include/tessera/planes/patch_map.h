@@ -24,7 +24,7 @@ namespace tessera::planes {
 
 struct PatchMapConfig {
   double max_normal_angle_deg = 5.0;  // a region continues a patch only this close in normal
-  double max_offset_m = 0.03;         // ... and with its centroid this close to the plane
+  double max_offset_m = 0.03;         // ... and with its centroid this close to its plane
   double cell_m = 0.05;               // occupancy grid cell in the plane
   // Finalization: a patch in view is stable once its area grew by at most max_growth (a
   // fraction) over its last stable_frames frames in view; a patch not seen for
@@ -36,6 +36,9 @@ struct PatchMapConfig {
   // Colour samples: at most samples_per_cell in each sample_cell_m square of the plane.
   double sample_cell_m = 0.005;
   int samples_per_cell = 2;
+  // Colours are taken from every N-th frame: at 30 frames/s neighbouring frames see nearly the
+  // same thing, and sampling is the costliest part of the plane stage.
+  int colour_every_n_frames = 2;
 };
 
 // One detected region in world coordinates.
@@ -56,7 +59,7 @@ struct Patch {
   Eigen::Vector3d origin = Eigen::Vector3d::Zero();
   Eigen::Vector3d u_axis = Eigen::Vector3d::UnitX();
   Eigen::Vector3d v_axis = Eigen::Vector3d::UnitY();
-  std::set<Cell> cells;
+  CellSet cells;
   PointMoments moments;  // of every point ever added, for the least-squares refit
   ColourSamples samples{0.005, 2};
 
@@ -66,6 +69,13 @@ struct Patch {
   double finalized_area_m2 = 0.0;
   std::deque<double> area_in_view;  // area after each of the last frames the patch was seen in
   long last_seen_frame = -1;
+
+  // The in-plane frame made exact for the refitted plane: origin moved onto it along the
+  // normal, axes made orthogonal to the normal. Cells and samples keep their (u, v).
+  struct Frame {
+    Eigen::Vector3d origin, u_axis, v_axis;
+  };
+  Frame planeFrame() const;
 
   Cell cellOf(const Eigen::Vector3d& X_W, double cell_m) const;
   Eigen::Vector3d cellCentre(const Cell& cell, double cell_m) const;
@@ -78,6 +88,7 @@ struct PatchEvent {
   Kind kind;
   int id;
   int version;
+  double area_m2 = 0.0;  // of the finalized version
 };
 
 class PatchMap {
@@ -100,6 +111,7 @@ class PatchMap {
   std::vector<PatchEvent> finalizeAll();
 
   const Patch* find(int id) const;
+  const PatchMapConfig& config() const { return config_; }
   std::size_t liveCount() const;       // not finalized in their current state
   std::size_t finalizedCount() const;  // finalized, in their current version
   Outline outlineOf(const Patch& patch) const { return traceOutline(patch.cells, config_.cell_m); }
@@ -109,7 +121,7 @@ class PatchMap {
   double areaM2(const Patch& patch) const;
 
  private:
-  bool continues(const Patch& patch, const Eigen::Vector3d& normal, double offset,
+  bool continues(const Patch& patch, const PlaneFit& region,
                  const std::vector<Eigen::Vector3d>& points) const;
   void absorb(Patch& into, const Patch& other) const;
   void addObservation(Patch& patch, const std::vector<Eigen::Vector3d>& points,

@@ -1,0 +1,58 @@
+#include "tessera/planes/planes_config.h"
+
+#include "tessera/core/error.h"
+
+namespace tessera::planes {
+
+void readConfig(const core::ConfigSection& section, PlaneDetectorConfig& config) {
+  section.read("working_scale", config.working_scale);
+  section.read("block_size", config.block_size);
+  section.read("baseline_m", config.baseline_m);
+  section.read("threshold_px", config.threshold_px);
+  section.read("refit_threshold_px", config.refit_threshold_px);
+  section.read("min_pixels", config.min_pixels);
+  section.read("min_depth_m", config.min_depth_m);
+  section.read("max_depth_m", config.max_depth_m);
+  if (config.working_scale < 1 || config.working_scale > 8) {
+    throw core::ConfigError("planes: working_scale must be between 1 and 8");
+  }
+  if (config.block_size < 4 || config.min_pixels < 3) {
+    throw core::ConfigError("planes: block_size must be at least 4 and min_pixels at least 3");
+  }
+  if (config.baseline_m <= 0.0 || config.threshold_px <= 0.0 || config.refit_threshold_px <= 0.0) {
+    throw core::ConfigError(
+        "planes: baseline_m, threshold_px and refit_threshold_px must be positive");
+  }
+  if (config.min_depth_m < 0.0 || config.max_depth_m <= config.min_depth_m) {
+    throw core::ConfigError("planes: need 0 <= min_depth_m < max_depth_m");
+  }
+}
+
+void readConfig(const core::ConfigSection& section, PatchMapConfig& config) {
+  section.read("max_normal_angle_deg", config.max_normal_angle_deg);
+  section.read("max_offset_m", config.max_offset_m);
+  section.read("cell_m", config.cell_m);
+  section.read("stable_frames", config.stable_frames);
+  section.read("max_growth", config.max_growth);
+  section.read("out_of_view_frames", config.out_of_view_frames);
+  section.read("min_area_m2", config.min_area_m2);
+  section.read("sample_cell_m", config.sample_cell_m);
+  section.read("samples_per_cell", config.samples_per_cell);
+  section.read("colour_every_n_frames", config.colour_every_n_frames);
+  if (config.max_normal_angle_deg <= 0.0 || config.max_offset_m <= 0.0 || config.cell_m <= 0.0) {
+    throw core::ConfigError(
+        "patches: max_normal_angle_deg, max_offset_m and cell_m must be positive");
+  }
+  if (config.stable_frames < 1 || config.out_of_view_frames < 1 || config.max_growth < 0.0) {
+    throw core::ConfigError(
+        "patches: stable_frames and out_of_view_frames must be at least 1, max_growth at least 0");
+  }
+  if (config.min_area_m2 < 0.0 || config.sample_cell_m <= 0.0 || config.samples_per_cell < 1 ||
+      config.colour_every_n_frames < 1) {
+    throw core::ConfigError(
+        "patches: min_area_m2 must be at least 0, sample_cell_m positive, samples_per_cell and "
+        "colour_every_n_frames at least 1");
+  }
+}
+
+}  // namespace tessera::planes
