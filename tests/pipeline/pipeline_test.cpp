@@ -83,8 +83,17 @@ TEST(Pipeline, RunsEveryGoodFrameAndWritesTheOutputs) {
   EXPECT_GT(summary.mesh_vertices, 1000u);
   EXPECT_TRUE(fs::is_regular_file(out / "mesh.ply"));
 
-  const auto lines = readJsonLines(out / "stats.jsonl");
-  ASSERT_EQ(lines.size(), 7u);
+  // stats.jsonl: one line per frame, then the patches finalized at the end of the stream.
+  auto lines = readJsonLines(out / "stats.jsonl");
+  ASSERT_GE(lines.size(), 8u);
+  for (std::size_t i = 7; i < lines.size(); ++i) {
+    EXPECT_EQ(lines[i]["type"], "patch");
+    EXPECT_EQ(lines[i]["event"], "finalized");
+  }
+  EXPECT_EQ(lines.size() - 7, summary.patches_finalized);
+  EXPECT_TRUE(fs::is_regular_file(out / "patches.obj"));
+  EXPECT_TRUE(fs::is_regular_file(out / "patches.json"));
+  lines.resize(7);
   for (std::size_t i = 0; i < lines.size(); ++i) {
     EXPECT_EQ(lines[i]["type"], "frame");
     EXPECT_TRUE(lines[i]["integrated"].get<bool>());
