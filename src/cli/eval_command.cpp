@@ -24,7 +24,9 @@ int evalCommand(const EvalArguments& args) {
   try {
     const nlohmann::json figures = eval::evaluateRun(args.run_dir, args.ground_truth);
     // One line per figure on stdout, for people and scripts alike.
-    for (const auto& [key, value] : figures.items()) fmt::print("{}: {}\n", key, value.dump());
+    for (const auto& [key, value] : figures.items()) {
+      if (key != "planes") fmt::print("{}: {}\n", key, value.dump());
+    }
     spdlog::info("ground-truth figures written into {}/report.json", args.run_dir);
     return 0;
   } catch (const core::Error& e) {

@@ -1,10 +1,12 @@
 #include "tessera/eval/run_evaluation.h"
 
+#include <algorithm>
 #include <fstream>
 
 #include <fmt/format.h>
 
 #include "tessera/core/error.h"
+#include "tessera/eval/plane_evaluation.h"
 #include "tessera/eval/trajectory.h"
 
 namespace tessera::eval {
@@ -31,6 +33,38 @@ Trajectory groundTruthTrajectory(const nlohmann::json& gt) {
   return trajectory;
 }
 
+void addPlaneFigures(const PlaneEvaluation& planes, nlohmann::json& figures) {
+  using nlohmann::json;
+  figures["plane_recall"] = planes.planes_counted > 0 ? json(planes.recall) : json(nullptr);
+  figures["plane_precision"] = planes.patches > 0 ? json(planes.precision) : json(nullptr);
+  figures["planes_counted"] = planes.planes_counted;
+  figures["planes_found"] = planes.planes_found;
+  figures["patches_evaluated"] = planes.patches;
+  figures["patches_matched"] = planes.patches_matched;
+  double worst_normal = 0.0, worst_offset = 0.0, worst_iou = 1.0;
+  json per_plane = json::array();
+  for (const PlaneResult& p : planes.planes) {
+    if (p.found) {
+      worst_normal = std::max(worst_normal, p.normal_error_deg);
+      worst_offset = std::max(worst_offset, p.offset_error_m);
+      worst_iou = std::min(worst_iou, p.iou);
+    }
+    per_plane.push_back({{"id", p.id},
+                         {"seen_m2", p.seen_m2},
+                         {"counted", p.counted},
+                         {"found", p.found},
+                         {"patch", p.patch_id >= 0 ? json(p.patch_id) : json(nullptr)},
+                         {"iou", p.iou},
+                         {"normal_error_deg", p.normal_error_deg},
+                         {"offset_error_m", p.offset_error_m}});
+  }
+  const bool any = planes.planes_found > 0;
+  figures["plane_normal_error_deg_max"] = any ? json(worst_normal) : json(nullptr);
+  figures["plane_offset_error_m_max"] = any ? json(worst_offset) : json(nullptr);
+  figures["plane_iou_min"] = any ? json(worst_iou) : json(nullptr);
+  figures["planes"] = per_plane;
+}
+
 }  // namespace
 
 nlohmann::json evaluateRun(const std::filesystem::path& run_dir,
@@ -41,9 +75,12 @@ nlohmann::json evaluateRun(const std::filesystem::path& run_dir,
 
   nlohmann::json figures = {{"ate_m", nullptr}, {"ate_max_m", nullptr}, {"ate_pairs", 0}};
   const auto trajectory_path = run_dir / "trajectory.txt";
+  const Trajectory truth_poses = groundTruthTrajectory(gt);
+  core::Isometry T_gt_est = core::Isometry::Identity();
   if (std::filesystem::exists(trajectory_path)) {
     const Trajectory estimate = readTumTrajectory(trajectory_path);
-    if (const auto ate = absoluteTrajectoryError(estimate, groundTruthTrajectory(gt))) {
+    if (const auto ate = absoluteTrajectoryError(estimate, truth_poses)) {
+      T_gt_est = ate->T_gt_est;
       figures["ate_m"] = ate->rmse_m;
       figures["ate_max_m"] = ate->max_m;
       figures["ate_pairs"] = ate->pairs;
@@ -52,9 +89,21 @@ nlohmann::json evaluateRun(const std::filesystem::path& run_dir,
       writeTumTrajectory(aligned, run_dir / "trajectory_aligned.txt");
     }
   }
+  figures["plane_recall"] = nullptr;
+  figures["plane_precision"] = nullptr;
+  const auto patches_path = run_dir / "patches.json";
+  if (gt.contains("planes") && std::filesystem::exists(patches_path)) {
+    PlaneEvaluation planes;
+    try {
+      planes = evaluatePlanes(gt, truth_poses, readJson(patches_path), T_gt_est);
+    } catch (const core::Error& e) {
+      throw core::Error(fmt::format("{} against {}: {}", patches_path.string(),
+                                    ground_truth.string(), e.what()));
+    }
+    addPlaneFigures(planes, figures);
+  }
   // Figures of stages that do not exist yet stay null (docs/METRICS.md).
-  for (const char* key : {"plane_recall", "plane_precision", "false_match_rate",
-                          "missed_match_rate", "economy", "gt_psnr_mean"}) {
+  for (const char* key : {"false_match_rate", "missed_match_rate", "economy", "gt_psnr_mean"}) {
     figures[key] = nullptr;
   }
   figures["ground_truth"] = ground_truth.string();

@@ -5,6 +5,7 @@
 #include <utility>
 
 #include <fmt/format.h>
+#include <opencv2/imgproc.hpp>
 #include <opencv2/rgbd.hpp>
 
 #include "tessera/core/error.h"
@@ -89,6 +90,14 @@ std::pair<cv::Mat, DetectedPlane> refit(const OrganisedPoints& organised, const 
                                         const PlaneDetectorConfig& config) {
   PlaneFit fit = fitPlane(momentsOf(organised.points_C, region));
   cv::Mat members = membersNear(organised, region, fit, k, config);
+  // Where the plane meets another surface, that surface's pixels near the intersection line
+  // are within the threshold too, and region growing follows them in thin strips. An opening
+  // removes strips narrower than the kernel.
+  if (config.strip_width_px > 1) {
+    const int side = config.strip_width_px | 1;
+    cv::morphologyEx(members, members, cv::MORPH_OPEN, cv::Mat::ones(side, side, CV_8UC1),
+                     cv::Point(-1, -1), 1, cv::BORDER_CONSTANT, cv::Scalar(0));
+  }
   const PointMoments moments = momentsOf(organised.points_C, members);
   DetectedPlane plane;
   plane.pixels = static_cast<std::size_t>(moments.count);

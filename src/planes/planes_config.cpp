@@ -10,14 +10,16 @@ void readConfig(const core::ConfigSection& section, PlaneDetectorConfig& config)
   section.read("baseline_m", config.baseline_m);
   section.read("threshold_px", config.threshold_px);
   section.read("refit_threshold_px", config.refit_threshold_px);
+  section.read("strip_width_px", config.strip_width_px);
   section.read("min_pixels", config.min_pixels);
   section.read("min_depth_m", config.min_depth_m);
   section.read("max_depth_m", config.max_depth_m);
   if (config.working_scale < 1 || config.working_scale > 8) {
     throw core::ConfigError("planes: working_scale must be between 1 and 8");
   }
-  if (config.block_size < 4 || config.min_pixels < 3) {
-    throw core::ConfigError("planes: block_size must be at least 4 and min_pixels at least 3");
+  if (config.block_size < 4 || config.min_pixels < 3 || config.strip_width_px < 0) {
+    throw core::ConfigError(
+        "planes: block_size must be at least 4, min_pixels at least 3, strip_width_px at least 0");
   }
   if (config.baseline_m <= 0.0 || config.threshold_px <= 0.0 || config.refit_threshold_px <= 0.0) {
     throw core::ConfigError(

@@ -243,6 +243,7 @@ TEST(RunConfig, DefaultYamlDocumentsEveryKeyWithTheStructDefaults) {
   EXPECT_EQ(from_file.planes.threshold_px, defaults.planes.threshold_px);
   EXPECT_EQ(from_file.planes.refit_threshold_px, defaults.planes.refit_threshold_px);
   EXPECT_EQ(from_file.planes.min_pixels, defaults.planes.min_pixels);
+  EXPECT_EQ(from_file.planes.strip_width_px, defaults.planes.strip_width_px);
   EXPECT_EQ(from_file.planes.min_depth_m, defaults.planes.min_depth_m);
   EXPECT_EQ(from_file.planes.max_depth_m, defaults.planes.max_depth_m);
   EXPECT_EQ(from_file.patches.max_normal_angle_deg, defaults.patches.max_normal_angle_deg);

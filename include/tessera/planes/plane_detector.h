@@ -25,6 +25,9 @@ struct PlaneDetectorConfig {
   // After the 3-D refit, pixels whose disparity is farther than this from the refitted plane
   // leave the region (the foot of a wall grown into the floor, say).
   double refit_threshold_px = 0.15;
+  // Strips of a region narrower than this (pixels at working resolution) are removed: they
+  // are other surfaces running along the line where they meet the plane.
+  int strip_width_px = 7;
   int min_pixels = 1200;  // smallest region, pixels at working resolution
   double min_depth_m = 0.3;
   double max_depth_m = 4.0;
