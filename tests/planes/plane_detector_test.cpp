@@ -66,13 +66,15 @@ TEST(PlaneDetector, PlanesOfTheNoisyOfficeMatchTheSceneGroundTruth) {
     EXPECT_GE(detection.planes.size(), 2u);  // at least the floor and a wall
     for (const DetectedPlane& plane : detection.planes) {
       const Eigen::Vector3d n_W = T_W_C.linear() * plane.normal_C;
-      const double d_W = n_W.dot(T_W_C * plane.centroid_C);
+      const Eigen::Vector3d centroid_W = T_W_C * plane.centroid_C;
       double best_angle = 180.0, best_offset = 0.0;
       for (const auto& truth : scene.planes) {
         // The scene's normal may face either way; compare lines, not directions.
         const double sign = truth.normal.dot(n_W) < 0.0 ? -1.0 : 1.0;
         const double angle = angleDeg(sign * truth.normal, n_W);
-        const double offset = std::abs(sign * truth.offset() - d_W);
+        // The region's centroid distance to the scene plane (a plane offset would magnify a
+        // small tilt by the distance from the world origin).
+        const double offset = std::abs(truth.normal.dot(centroid_W) - truth.offset());
         if (offset < 0.05 && angle < best_angle) best_angle = angle, best_offset = offset;
       }
       EXPECT_LT(best_angle, 2.0) << plane.pixels << " pixels at " << plane.centroid_C.transpose();
