@@ -21,17 +21,23 @@ std::string resolvedSource(const std::string& path) {
              : (fs::path(TESSERA_SOURCE_DIR) / "recordings/tum_fr1_rpy_20.oni").string();
 }
 
-std::unique_ptr<core::FrameSource> openSource(const std::string& path) {
+std::unique_ptr<core::FrameSource> openSource(const std::string& path,
+                                              const std::optional<core::Intrinsics>& intrinsics) {
   const std::string resolved = resolvedSource(path);
   if (fs::path(resolved).extension() == ".oni") {
-    return std::make_unique<drivers::oni::OniSource>(resolved);
+    drivers::oni::OniSourceOptions options;
+    options.intrinsics = intrinsics;
+    return std::make_unique<drivers::oni::OniSource>(resolved, options);
   }
-  return std::make_unique<drivers::DatasetSource>(resolved);
+  drivers::DatasetOptions options;
+  options.intrinsics = intrinsics;
+  return std::make_unique<drivers::DatasetSource>(resolved, options);
 }
 
 std::vector<core::Frame> loadFrames(const std::string& path, std::size_t max_frames,
-                                    bool need_truth) {
-  const auto source = openSource(path);
+                                    bool need_truth,
+                                    const std::optional<core::Intrinsics>& intrinsics) {
+  const auto source = openSource(path, intrinsics);
   std::vector<core::Frame> frames;
   while (max_frames == 0 || frames.size() < max_frames) {
     core::ReadResult result = source->read();

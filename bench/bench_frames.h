@@ -2,6 +2,7 @@
 // What the benchmarks share: the default recording to measure and frames held in memory.
 #include <cstddef>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -14,13 +15,15 @@ namespace tessera::bench {
 // recordings/tum_fr1_rpy_20.oni.
 std::string resolvedSource(const std::string& path);
 
-// A dataset folder or an .oni recording.
-std::unique_ptr<core::FrameSource> openSource(const std::string& path);
+// A dataset folder or an .oni recording; `intrinsics` overrides what the source carries.
+std::unique_ptr<core::FrameSource> openSource(
+    const std::string& path, const std::optional<core::Intrinsics>& intrinsics = std::nullopt);
 
 // Reads up to max_frames good frames (0: all), colour registered to depth. With need_truth,
 // throws core::Error when a frame has no ground-truth pose.
-std::vector<core::Frame> loadFrames(const std::string& path, std::size_t max_frames,
-                                    bool need_truth);
+std::vector<core::Frame> loadFrames(
+    const std::string& path, std::size_t max_frames, bool need_truth,
+    const std::optional<core::Intrinsics>& intrinsics = std::nullopt);
 
 // Replays frames held in memory, so that a measurement does not include decoding.
 class MemorySource : public core::FrameSource {

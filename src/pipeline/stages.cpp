@@ -120,6 +120,15 @@ PlaneStage::PlaneStage(const planes::PlaneDetectorConfig& detector,
                        const planes::PatchMapConfig& patches)
     : detector_(detector), map_(patches) {}
 
+bool PlaneStage::wantsColours(std::uint64_t index, const core::Isometry& T_W_C) const {
+  const auto every = static_cast<std::uint64_t>(map_.config().colour_every_n_frames);
+  if (!last_colour_pose_ || index % every == 0) return true;
+  // A frame far from the last one sampled (a recording of sparse keyframes) is always used.
+  const core::Isometry motion = last_colour_pose_->inverse() * T_W_C;
+  const double angle_deg = Eigen::AngleAxisd(motion.linear()).angle() * 180.0 / M_PI;
+  return motion.translation().norm() > 0.05 || angle_deg > 3.0;
+}
+
 void PlaneStage::count(const std::vector<planes::PatchEvent>& events) {
   for (const planes::PatchEvent& event : events) {
     (event.kind == planes::PatchEvent::Kind::kFinalized ? finalizations_ : retirements_)++;
@@ -135,9 +144,9 @@ FusedFrame PlaneStage::process(FusedFrame fused) {
         fused.planes_detected = detection.planes.size();
         const std::vector<int> ids =
             map_.add(planes::observationsOf(fused.frame, detection, *fused.T_W_C));
-        if (fused.frame.index % static_cast<std::uint64_t>(map_.config().colour_every_n_frames) ==
-            0) {
+        if (wantsColours(fused.frame.index, *fused.T_W_C)) {
           map_.addColours(fused.frame, detection, *fused.T_W_C, ids);
+          last_colour_pose_ = *fused.T_W_C;
         }
       }
     } catch (const core::Error& e) {

@@ -136,9 +136,13 @@ class PlaneStage {
 
  private:
   void count(const std::vector<planes::PatchEvent>& events);
+  // Every N-th frame (patches.colour_every_n_frames), and any frame the camera has moved
+  // more than 5 cm or 3 degrees from since the last one sampled.
+  bool wantsColours(std::uint64_t index, const core::Isometry& T_W_C) const;
 
   planes::PlaneDetector detector_;
   planes::PatchMap map_;
+  std::optional<core::Isometry> last_colour_pose_;
   std::size_t finalizations_ = 0;
   std::size_t retirements_ = 0;
   StageTimer timer_;

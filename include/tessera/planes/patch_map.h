@@ -36,8 +36,9 @@ struct PatchMapConfig {
   // Colour samples: at most samples_per_cell in each sample_cell_m square of the plane.
   double sample_cell_m = 0.005;
   int samples_per_cell = 2;
-  // Colours are taken from every N-th frame: at 30 frames/s neighbouring frames see nearly the
-  // same thing, and sampling is the costliest part of the plane stage.
+  // Colours are taken from every N-th frame (and from frames far from the last one sampled):
+  // at 30 frames/s neighbouring frames see nearly the same thing, and sampling is the
+  // costliest part of the plane stage.
   int colour_every_n_frames = 2;
 };
 
