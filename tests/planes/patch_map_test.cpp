@@ -79,6 +79,66 @@ TEST(PatchMap, RegionsOfARenderedPlaneBecomeWorldPoints) {
   EXPECT_LT(worst, 0.003);  // millimetre depth rounding at about 2 m
 }
 
+// A wall 2 m away with a 40 cm square box face 1.2 m in front of it, seen from T_W_C: the
+// nearest of the two along each ray, in millimetres.
+core::Frame wallBehindBox(const core::Isometry& T_W_C) {
+  core::Frame frame = test::renderPlane(test::kinectIntrinsics(), T_W_C,
+                                        Eigen::Vector3d(0, 0, -1), -2.0);
+  const core::Intrinsics& k = frame.intrinsics;
+  for (int v = 0; v < k.height; ++v) {
+    for (int u = 0; u < k.width; ++u) {
+      const Eigen::Vector3d ray = T_W_C.linear() * Eigen::Vector3d((u - k.cx) / k.fx,
+                                                                   (v - k.cy) / k.fy, 1.0);
+      const double t = (0.8 - T_W_C.translation().z()) / ray.z();
+      const Eigen::Vector3d X = T_W_C.translation() + t * ray;
+      if (t > 0.0 && std::abs(X.x()) <= 0.2 && std::abs(X.y()) <= 0.2) {
+        frame.depth_mm.at<std::uint16_t>(v, u) = static_cast<std::uint16_t>(std::lround(t * 1000));
+      }
+    }
+  }
+  return frame;
+}
+
+TEST(PatchMap, AWallPartlyHiddenByClutterIsOnePatchWithAHoleThatFillsInFromOtherViews) {
+  const PlaneDetector detector(PlaneDetectorConfig{});
+  PatchMap map(PatchMapConfig{});
+  auto see = [&](const core::Isometry& T_W_C) {
+    const core::Frame frame = wallBehindBox(T_W_C);
+    return map.add(observationsOf(frame, detector.detect(frame), T_W_C));
+  };
+  core::Isometry T_W_C = core::Isometry::Identity();
+  see(T_W_C);
+  ASSERT_EQ(map.patches().size(), 2u);  // the wall and the box's face
+  const Patch* wall = nullptr;
+  for (const Patch& p : map.patches()) {
+    if (std::abs(std::abs(p.offset) - 2.0) < 0.01) wall = &p;
+  }
+  ASSERT_NE(wall, nullptr);
+  EXPECT_NEAR(std::abs(wall->normal.z()), 1.0, 1e-4);
+  Outline outline = map.outlineOf(*wall);
+  ASSERT_EQ(outline.parts.size(), 1u);
+  ASSERT_EQ(outline.parts.front().holes.size(), 1u);
+  // The box hides a 1 m square of wall (0.4 m at 0.8 m, seen from 2 m): 1 m^2, to within the
+  // cells and the strips cut at the box's edge.
+  const double hidden = polygonArea(outline.parts.front().holes.front());
+  EXPECT_NEAR(hidden, 1.0, 0.25);
+  const int wall_id = wall->id;
+
+  // Seen again from 60 cm to the side, the box hides another part of the wall.
+  T_W_C.translation() = Eigen::Vector3d(0.6, 0.0, 0.0);
+  see(T_W_C);
+  wall = map.find(wall_id);
+  ASSERT_NE(wall, nullptr);
+  outline = map.outlineOf(*wall);
+  ASSERT_EQ(outline.parts.size(), 1u);
+  double still_hidden = 0.0;
+  for (const Polygon2& hole : outline.parts.front().holes) still_hidden += polygonArea(hole);
+  EXPECT_LT(still_hidden, 0.5 * hidden);
+  std::size_t walls = 0;
+  for (const Patch& p : map.patches()) walls += std::abs(std::abs(p.offset) - 2.0) < 0.03 ? 1 : 0;
+  EXPECT_EQ(walls, 1u);
+}
+
 // Finalization on a synthetic sequence: a table top grows by 10 cm per frame for 20 frames,
 // then stays the same while in view. With 10 stable frames it is finalized exactly when its
 // area has not grown for 10 frames in view.
