@@ -49,7 +49,9 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
   SourceStage source_stage(source, options.max_frames);
   TrackingStage tracking_stage(config.tracker, options.poses);
   IntegrationStage integration_stage(config.tsdf, threads);
-  PlaneStage plane_stage(config.planes, config.patches);
+  planes::PlaneAlignmentConfig alignment = config.pose_correction;
+  alignment.enabled = alignment.enabled && options.poses == PoseSource::kTrack;
+  PlaneStage plane_stage(config.planes, config.patches, alignment);
   StatsSink sink(options.out_dir, total, options.on_progress);
 
   const auto start = std::chrono::steady_clock::now();

@@ -21,6 +21,7 @@ RunConfig readRunConfig(const core::ConfigDocument& doc) {
     fusion::readConfig(root.section("tsdf"), config.tsdf);
     planes::readConfig(root.section("planes"), config.planes);
     planes::readConfig(root.section("patches"), config.patches);
+    planes::readConfig(root.section("pose_correction"), config.pose_correction);
   } catch (const core::ConfigError& e) {
     const std::string message = e.what();
     // Range checks inside the stages do not know the file; add it.

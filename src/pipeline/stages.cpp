@@ -117,8 +117,9 @@ FusedFrame IntegrationStage::process(TrackedFrame tracked) {
 }
 
 PlaneStage::PlaneStage(const planes::PlaneDetectorConfig& detector,
-                       const planes::PatchMapConfig& patches)
-    : detector_(detector), map_(patches) {}
+                       const planes::PatchMapConfig& patches,
+                       const planes::PlaneAlignmentConfig& alignment)
+    : detector_(detector), map_(patches), alignment_(alignment) {}
 
 bool PlaneStage::wantsColours(std::uint64_t index, const core::Isometry& T_W_C) const {
   const auto every = static_cast<std::uint64_t>(map_.config().colour_every_n_frames);
@@ -142,11 +143,32 @@ FusedFrame PlaneStage::process(FusedFrame fused) {
       if (fused.integrated && fused.T_W_C) {
         const planes::PlaneDetection detection = detector_.detect(fused.frame);
         fused.planes_detected = detection.planes.size();
-        const std::vector<int> ids =
-            map_.add(planes::observationsOf(fused.frame, detection, *fused.T_W_C));
-        if (wantsColours(fused.frame.index, *fused.T_W_C)) {
-          map_.addColours(fused.frame, detection, *fused.T_W_C, ids);
-          last_colour_pose_ = *fused.T_W_C;
+        // The tracked pose, corrected for the drift measured against the patches so far.
+        core::Isometry T_W_C = correction_ * *fused.T_W_C;
+        std::vector<planes::PlaneObservation> observations =
+            planes::observationsOf(fused.frame, detection, T_W_C);
+        if (const auto D = planes::alignToPatches(map_, observations, T_W_C.translation(),
+                                                  alignment_)) {
+          correction_ = *D * correction_;
+          T_W_C = *D * T_W_C;
+          for (auto& observation : observations) {
+            for (auto& X : observation.points_W) X = *D * X;
+          }
+        }
+        fused.T_W_C_planes = T_W_C;
+        std::vector<int> ids = map_.add(observations);
+        if (wantsColours(fused.frame.index, T_W_C)) {
+          map_.addColours(fused.frame, detection, T_W_C, ids);
+          last_colour_pose_ = T_W_C;
+        } else {
+          // A skipped frame still colours the patches that have hardly any colour yet (new
+          // ones), so that no patch is left without samples.
+          constexpr std::size_t kFewSamples = 2000;
+          for (int& id : ids) {
+            const planes::Patch* patch = map_.find(id);
+            if (patch == nullptr || patch->samples.size() >= kFewSamples) id = -1;
+          }
+          map_.addColours(fused.frame, detection, T_W_C, ids);
         }
       }
     } catch (const core::Error& e) {
@@ -186,7 +208,10 @@ StatsSink::StatsSink(const std::filesystem::path& out_dir, std::optional<std::si
 void StatsSink::process(const FusedFrame& fused) {
   ScopedStageTime time(timer_);
   ++frames_done_;
-  if (fused.T_W_C) estimate_[fused.frame.timestamp_ns] = *fused.T_W_C;
+  // The map's pose of the frame: corrected against the patches when the plane stage did so.
+  const std::optional<core::Isometry> pose =
+      fused.T_W_C_planes ? fused.T_W_C_planes : fused.T_W_C;
+  if (pose) estimate_[fused.frame.timestamp_ns] = *pose;
   if (fused.frame.T_W_C_gt) ground_truth_[fused.frame.timestamp_ns] = *fused.frame.T_W_C_gt;
   map_bytes_ = fused.tsdf_bytes;  // textures join the map size in later stages
   const double elapsed_s =
@@ -211,7 +236,7 @@ void StatsSink::process(const FusedFrame& fused) {
     if (!fused.integrated) line["skip_reason"] = fused.skip_reason;
     stats_ << line.dump() << '\n';
     writePatchEvents(fused.patch_events);
-    if (fused.T_W_C) trajectory_ << eval::tumLine(fused.frame.timestamp_ns, *fused.T_W_C);
+    if (pose) trajectory_ << eval::tumLine(fused.frame.timestamp_ns, *pose);
     if (!stats_ || !trajectory_) {
       write_failed_ = true;
       spdlog::error("{}: writing failed (disk full?); no further stats lines",

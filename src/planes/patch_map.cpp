@@ -190,6 +190,10 @@ void PatchMap::addColours(const core::Frame& frame, const PlaneDetection& detect
     target.u_C = (T_C_W.linear() * it->u_axis).cast<float>();
     target.v_C = (T_C_W.linear() * it->v_axis).cast<float>();
   }
+  if (std::none_of(targets.begin(), targets.end(),
+                   [](const Target& t) { return t.samples != nullptr; })) {
+    return;
+  }
   const int scale = detection.scale;
   for (int y = 0; y < frame.rgb.rows; ++y) {
     const auto* label = detection.labels.ptr<std::uint8_t>(y / scale);
@@ -236,6 +240,7 @@ std::vector<PatchEvent> PatchMap::endFrame(long frame_index) {
       continue;
     }
     patch.last_seen_frame = frame_index;
+    patch.frames_seen += 1;
     patch.area_in_view.push_back(area);
     while (patch.area_in_view.size() > static_cast<std::size_t>(config_.stable_frames) + 1) {
       patch.area_in_view.pop_front();

@@ -57,4 +57,19 @@ void readConfig(const core::ConfigSection& section, PatchMapConfig& config) {
   }
 }
 
+void readConfig(const core::ConfigSection& section, PlaneAlignmentConfig& config) {
+  section.read("enabled", config.enabled);
+  section.read("min_patch_area_m2", config.min_patch_area_m2);
+  section.read("min_patch_frames", config.min_patch_frames);
+  section.read("points_per_region", config.points_per_region);
+  section.read("max_step_m", config.max_step_m);
+  section.read("max_step_deg", config.max_step_deg);
+  if (config.min_patch_area_m2 < 0.0 || config.min_patch_frames < 0 ||
+      config.points_per_region < 3 || config.max_step_m <= 0.0 || config.max_step_deg <= 0.0) {
+    throw core::ConfigError(
+        "pose_correction: min_patch_area_m2 and min_patch_frames must be at least 0, "
+        "points_per_region at least 3, max_step_m and max_step_deg positive");
+  }
+}
+
 }  // namespace tessera::planes

@@ -256,6 +256,14 @@ TEST(RunConfig, DefaultYamlDocumentsEveryKeyWithTheStructDefaults) {
   EXPECT_EQ(from_file.patches.sample_cell_m, defaults.patches.sample_cell_m);
   EXPECT_EQ(from_file.patches.samples_per_cell, defaults.patches.samples_per_cell);
   EXPECT_EQ(from_file.patches.colour_every_n_frames, defaults.patches.colour_every_n_frames);
+  EXPECT_EQ(from_file.pose_correction.enabled, defaults.pose_correction.enabled);
+  EXPECT_EQ(from_file.pose_correction.min_patch_area_m2,
+            defaults.pose_correction.min_patch_area_m2);
+  EXPECT_EQ(from_file.pose_correction.min_patch_frames, defaults.pose_correction.min_patch_frames);
+  EXPECT_EQ(from_file.pose_correction.points_per_region,
+            defaults.pose_correction.points_per_region);
+  EXPECT_EQ(from_file.pose_correction.max_step_m, defaults.pose_correction.max_step_m);
+  EXPECT_EQ(from_file.pose_correction.max_step_deg, defaults.pose_correction.max_step_deg);
 }
 
 TEST(RunConfig, MisspelledKeyAndBadRangeNameTheFile) {

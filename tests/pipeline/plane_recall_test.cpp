@@ -1,3 +1,4 @@
+#include <optional>
 #include <set>
 #include <string>
 
@@ -14,24 +15,20 @@ namespace {
 
 namespace fs = std::filesystem;
 
-// The default recording at its ground-truth poses, so that the figures measure plane
-// extraction alone (tracking drift adds its own offset errors; docs/METRICS.md has both).
-// Measured: recall 0.8 (8 of 10 planes seen over 0.25 m^2; the cabinet's top and left side,
-// seen only at grazing angles, are missed) and precision 1.0.
-TEST(PlaneRecall, DefaultRecordingAtTruePosesFindsTheRoomsPlanesWithoutDuplicates) {
+// Runs the default recording and evaluates its planes; nothing when it was not rendered.
+std::optional<nlohmann::json> planeFigures(PoseSource poses) {
   const fs::path recording = test::sourceDir() / "recordings/office.oni";
-  const fs::path truth = test::sourceDir() / "recordings/office.gt.json";
-  if (!fs::is_regular_file(recording)) {
-    GTEST_SKIP() << recording.string() << " not rendered (configure with TESSERA_RENDER_DEFAULT_RECORDING=ON)";
-  }
+  if (!fs::is_regular_file(recording)) return std::nullopt;
   drivers::oni::OniSource source(recording);
   RunOptions options;
   options.out_dir = test::freshTempDir();
-  options.poses = PoseSource::kGroundTruth;
+  options.poses = poses;
   const RunSummary summary = runPipeline(source, loadRunConfig(std::nullopt), options);
-  ASSERT_EQ(summary.frames, 320u);
-  const nlohmann::json figures = eval::evaluateRun(options.out_dir, truth);
+  EXPECT_EQ(summary.frames, 320u);
+  return eval::evaluateRun(options.out_dir, test::sourceDir() / "recordings/office.gt.json");
+}
 
+void expectTheRoomsPlanes(const nlohmann::json& figures) {
   EXPECT_GE(figures["plane_recall"].get<double>(), 0.75);
   EXPECT_GE(figures["plane_precision"].get<double>(), 0.95);
   EXPECT_LE(figures["plane_normal_error_deg_max"].get<double>(), 2.0);
@@ -45,6 +42,29 @@ TEST(PlaneRecall, DefaultRecordingAtTruePosesFindsTheRoomsPlanesWithoutDuplicate
     if (big.count(plane["id"]) > 0 && plane["found"].get<bool>()) ++big_found;
   }
   EXPECT_EQ(big_found, big.size());
+}
+
+#define TESSERA_REQUIRE_DEFAULT_RECORDING(figures)                                          \
+  if (!(figures)) {                                                                        \
+    GTEST_SKIP() << "recordings/office.oni not rendered (configure with "                  \
+                    "TESSERA_RENDER_DEFAULT_RECORDING=ON)";                                \
+  }
+
+// At the recording's true poses the figures measure plane extraction alone. Measured: recall
+// 0.8 (8 of the 10 planes seen over 0.25 m^2; the cabinet's top and left side, seen only at
+// grazing angles, are missed), precision 1.0.
+TEST(PlaneRecall, DefaultRecordingAtTruePosesFindsTheRoomsPlanesWithoutDuplicates) {
+  const auto figures = planeFigures(PoseSource::kGroundTruth);
+  TESSERA_REQUIRE_DEFAULT_RECORDING(figures);
+  expectTheRoomsPlanes(*figures);
+}
+
+// With tracked poses (8 mm ATE) the drift correction against the patches keeps them within the
+// same bounds; without it the table tops land 1.4 to 1.6 cm off (recall 0.5, precision 0.63).
+TEST(PlaneRecall, DefaultRecordingAtTrackedPosesMeetsTheSameBounds) {
+  const auto figures = planeFigures(PoseSource::kTrack);
+  TESSERA_REQUIRE_DEFAULT_RECORDING(figures);
+  expectTheRoomsPlanes(*figures);
 }
 
 }  // namespace

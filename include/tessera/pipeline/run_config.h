@@ -7,6 +7,7 @@
 #include "tessera/fusion/tracker.h"
 #include "tessera/fusion/tsdf_map.h"
 #include "tessera/planes/patch_map.h"
+#include "tessera/planes/plane_alignment.h"
 #include "tessera/planes/plane_detector.h"
 
 namespace tessera::pipeline {
@@ -23,6 +24,7 @@ struct RunConfig {
   fusion::TsdfConfig tsdf;
   planes::PlaneDetectorConfig planes;
   planes::PatchMapConfig patches;
+  planes::PlaneAlignmentConfig pose_correction;
 };
 
 // Reads every section of `doc` into a RunConfig and rejects unknown keys.

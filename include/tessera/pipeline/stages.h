@@ -16,6 +16,7 @@
 #include "tessera/fusion/tsdf_map.h"
 #include "tessera/pipeline/stage_timer.h"
 #include "tessera/planes/patch_map.h"
+#include "tessera/planes/plane_alignment.h"
 #include "tessera/planes/plane_detector.h"
 
 namespace tessera::pipeline {
@@ -68,6 +69,7 @@ struct FusedFrame {
   double tracking_ms = 0.0;
   double integration_ms = 0.0;
   // Filled by the plane stage.
+  std::optional<core::Isometry> T_W_C_planes;  // the pose corrected against the patch map
   double planes_ms = 0.0;
   std::size_t planes_detected = 0;
   std::size_t patches_live = 0;
@@ -123,7 +125,8 @@ class IntegrationStage {
 // colours, and finalizes patches that stopped growing or left the view.
 class PlaneStage {
  public:
-  PlaneStage(const planes::PlaneDetectorConfig& detector, const planes::PatchMapConfig& patches);
+  PlaneStage(const planes::PlaneDetectorConfig& detector, const planes::PatchMapConfig& patches,
+             const planes::PlaneAlignmentConfig& alignment);
 
   FusedFrame process(FusedFrame fused);
   // End of stream: finalizes every remaining patch above the area bound.
@@ -143,6 +146,8 @@ class PlaneStage {
   planes::PlaneDetector detector_;
   planes::PatchMap map_;
   std::optional<core::Isometry> last_colour_pose_;
+  planes::PlaneAlignmentConfig alignment_;
+  core::Isometry correction_ = core::Isometry::Identity();  // world drift, carried frame to frame
   std::size_t finalizations_ = 0;
   std::size_t retirements_ = 0;
   StageTimer timer_;

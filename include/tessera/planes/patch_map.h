@@ -70,6 +70,7 @@ struct Patch {
   double finalized_area_m2 = 0.0;
   std::deque<double> area_in_view;  // area after each of the last frames the patch was seen in
   long last_seen_frame = -1;
+  int frames_seen = 0;
 
   // The in-plane frame made exact for the refitted plane: origin moved onto it along the
   // normal, axes made orthogonal to the normal. Cells and samples keep their (u, v).
@@ -113,6 +114,10 @@ class PatchMap {
 
   const Patch* find(int id) const;
   const PatchMapConfig& config() const { return config_; }
+  // Whether a region (its least-squares plane and points, world frame) continues `patch`:
+  // normal and centroid within the bounds, touching its cells.
+  bool continues(const Patch& patch, const PlaneFit& region,
+                 const std::vector<Eigen::Vector3d>& points) const;
   std::size_t liveCount() const;       // not finalized in their current state
   std::size_t finalizedCount() const;  // finalized, in their current version
   Outline outlineOf(const Patch& patch) const { return traceOutline(patch.cells, config_.cell_m); }
@@ -122,8 +127,6 @@ class PatchMap {
   double areaM2(const Patch& patch) const;
 
  private:
-  bool continues(const Patch& patch, const PlaneFit& region,
-                 const std::vector<Eigen::Vector3d>& points) const;
   void absorb(Patch& into, const Patch& other) const;
   void addObservation(Patch& patch, const std::vector<Eigen::Vector3d>& points,
                       const PointMoments& moments) const;
