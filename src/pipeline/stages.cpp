@@ -202,7 +202,8 @@ StatsSink::StatsSink(const std::filesystem::path& out_dir, std::optional<std::si
        {std::pair{&stats_, &stats_path_}, {&trajectory_, &trajectory_path_}}) {
     if (!*file) throw core::Error(fmt::format("{}: cannot be created", path->string()));
   }
-  trajectory_ << "# camera poses T_W_C the frames were fused at: timestamp tx ty tz qx qy qz qw\n";
+  trajectory_ << "# camera poses T_W_C of the map (tracked, corrected against the planes): "
+                 "timestamp tx ty tz qx qy qz qw\n";
 }
 
 void StatsSink::process(const FusedFrame& fused) {
