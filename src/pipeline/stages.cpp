@@ -130,6 +130,22 @@ bool PlaneStage::wantsColours(std::uint64_t index, const core::Isometry& T_W_C) 
   return motion.translation().norm() > 0.05 || angle_deg > 3.0;
 }
 
+void PlaneStage::sampleColours(const core::Frame& frame, const planes::PlaneDetection& detection,
+                               const core::Isometry& T_W_C, std::vector<int> ids) {
+  if (wantsColours(frame.index, T_W_C)) {
+    last_colour_pose_ = T_W_C;
+  } else {
+    // A skipped frame still colours the patches that have hardly any colour yet (new ones),
+    // so that no patch is left without samples.
+    constexpr std::size_t kFewSamples = 2000;
+    for (int& id : ids) {
+      const planes::Patch* patch = map_.find(id);
+      if (patch == nullptr || patch->samples.size() >= kFewSamples) id = -1;
+    }
+  }
+  map_.addColours(frame, detection, T_W_C, ids);
+}
+
 void PlaneStage::count(const std::vector<planes::PatchEvent>& events) {
   for (const planes::PatchEvent& event : events) {
     (event.kind == planes::PatchEvent::Kind::kFinalized ? finalizations_ : retirements_)++;
@@ -141,35 +157,21 @@ FusedFrame PlaneStage::process(FusedFrame fused) {
     ScopedStageTime time(timer_);
     try {
       if (fused.integrated && fused.T_W_C) {
+        // The tracked pose, corrected for the drift measured against the patches so far.
+        fused.T_W_C_planes = correction_ * *fused.T_W_C;
         const planes::PlaneDetection detection = detector_.detect(fused.frame);
         fused.planes_detected = detection.planes.size();
-        // The tracked pose, corrected for the drift measured against the patches so far.
-        core::Isometry T_W_C = correction_ * *fused.T_W_C;
         std::vector<planes::PlaneObservation> observations =
-            planes::observationsOf(fused.frame, detection, T_W_C);
-        if (const auto D = planes::alignToPatches(map_, observations, T_W_C.translation(),
-                                                  alignment_)) {
+            planes::observationsOf(fused.frame, detection, *fused.T_W_C_planes);
+        if (const auto D = planes::alignToPatches(
+                map_, observations, fused.T_W_C_planes->translation(), alignment_)) {
           correction_ = *D * correction_;
-          T_W_C = *D * T_W_C;
+          fused.T_W_C_planes = *D * *fused.T_W_C_planes;
           for (auto& observation : observations) {
             for (auto& X : observation.points_W) X = *D * X;
           }
         }
-        fused.T_W_C_planes = T_W_C;
-        std::vector<int> ids = map_.add(observations);
-        if (wantsColours(fused.frame.index, T_W_C)) {
-          map_.addColours(fused.frame, detection, T_W_C, ids);
-          last_colour_pose_ = T_W_C;
-        } else {
-          // A skipped frame still colours the patches that have hardly any colour yet (new
-          // ones), so that no patch is left without samples.
-          constexpr std::size_t kFewSamples = 2000;
-          for (int& id : ids) {
-            const planes::Patch* patch = map_.find(id);
-            if (patch == nullptr || patch->samples.size() >= kFewSamples) id = -1;
-          }
-          map_.addColours(fused.frame, detection, T_W_C, ids);
-        }
+        sampleColours(fused.frame, detection, *fused.T_W_C_planes, map_.add(observations));
       }
     } catch (const core::Error& e) {
       spdlog::warn("plane detection skipped {}", e.what());

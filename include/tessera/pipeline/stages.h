@@ -142,6 +142,10 @@ class PlaneStage {
   // Every N-th frame (patches.colour_every_n_frames), and any frame the camera has moved
   // more than 5 cm or 3 degrees from since the last one sampled.
   bool wantsColours(std::uint64_t index, const core::Isometry& T_W_C) const;
+  // Colours of the regions that went to patches `ids`; on a frame not wanted for colour, only
+  // for patches that have hardly any yet.
+  void sampleColours(const core::Frame& frame, const planes::PlaneDetection& detection,
+                     const core::Isometry& T_W_C, std::vector<int> ids);
 
   planes::PlaneDetector detector_;
   planes::PatchMap map_;
