@@ -6,12 +6,10 @@
 namespace tessera::planes {
 
 ColourSamples::ColourSamples(double cell_m, int per_cell)
-    : cell_m_(cell_m),
-      inverse_cell_(static_cast<float>(1.0 / cell_m)),
+    : inverse_cell_(static_cast<float>(1.0 / cell_m)),
       per_cell_(std::max(1, per_cell)) {}
 
 ColourSamples& ColourSamples::operator=(const ColourSamples& other) {
-  cell_m_ = other.cell_m_;
   inverse_cell_ = other.inverse_cell_;
   per_cell_ = other.per_cell_;
   tiles_ = other.tiles_;
@@ -21,7 +19,6 @@ ColourSamples& ColourSamples::operator=(const ColourSamples& other) {
 }
 
 ColourSamples& ColourSamples::operator=(ColourSamples&& other) noexcept {
-  cell_m_ = other.cell_m_;
   inverse_cell_ = other.inverse_cell_;
   per_cell_ = other.per_cell_;
   tiles_ = std::move(other.tiles_);

@@ -36,8 +36,7 @@ class ColourSamples {
   static constexpr int kTileCells = 32;  // tiles of 32 x 32 cells are allocated as touched
   std::vector<ColourSample>& tileAt(int tile_u, int tile_v);
 
-  double cell_m_;
-  float inverse_cell_;
+  float inverse_cell_;  // 1 / the cell's side, metres
   int per_cell_;
   std::unordered_map<std::int64_t, std::vector<ColourSample>> tiles_;
   std::size_t size_ = 0;
