@@ -51,10 +51,10 @@ void ColourSamples::add(const ColourSample& sample) {
   ColourSample* slots = tile.data() + ((cv & 31) * kTileCells + (cu & 31)) * per_cell_;
   ColourSample* lightest = slots;
   for (int i = 1; i < per_cell_; ++i) {
-    if (slots[i].weight < lightest->weight) lightest = slots + i;
+    if (slots[i].score < lightest->score) lightest = slots + i;
   }
-  if (lightest->weight >= sample.weight) return;
-  if (lightest->weight == 0.0F) ++size_;
+  if (lightest->score >= sample.score) return;
+  if (lightest->score == ColourSample::kEmpty) ++size_;
   *lightest = sample;
 }
 
@@ -68,7 +68,7 @@ std::vector<ColourSample> ColourSamples::all() const {
   samples.reserve(size_);
   for (const auto& [key, tile] : tiles_) {
     for (const ColourSample& sample : tile) {
-      if (sample.weight > 0.0F) samples.push_back(sample);
+      if (sample.score != ColourSample::kEmpty) samples.push_back(sample);
     }
   }
   return samples;

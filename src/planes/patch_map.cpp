@@ -106,6 +106,8 @@ void PatchMap::absorb(Patch& into, const Patch& other) const {
     sample.v = static_cast<float>((X - into.origin).dot(into.v_axis));
     into.samples.add(sample);
   }
+  into.footprint_sum_m += other.footprint_sum_m;
+  into.footprint_pixels += other.footprint_pixels;
   into.moments.add(other.moments);
   refit(into);
 }
@@ -163,7 +165,8 @@ std::vector<int> PatchMap::add(const std::vector<PlaneObservation>& observations
 }
 
 void PatchMap::addColours(const core::Frame& frame, const PlaneDetection& detection,
-                          const core::Isometry& T_W_C, const std::vector<int>& ids) {
+                          const core::Isometry& T_W_C, const std::vector<int>& ids,
+                          double sharpness) {
   const core::Intrinsics& k = frame.intrinsics;
   if (frame.colour_camera || frame.rgb.type() != CV_8UC3 || frame.rgb.cols != k.width ||
       frame.rgb.rows != k.height) {
@@ -172,6 +175,7 @@ void PatchMap::addColours(const core::Frame& frame, const PlaneDetection& detect
   // Per region, its patch's plane in the camera frame (n_C . X_C = d_C) and the camera-frame
   // position and axes of the patch's (u, v) frame, so each pixel costs a few multiplies.
   struct Target {
+    Patch* patch = nullptr;
     ColourSamples* samples = nullptr;
     Eigen::Vector3f n_C, origin_C, u_C, v_C;
     float d_C = 0.0F;
@@ -183,6 +187,7 @@ void PatchMap::addColours(const core::Frame& frame, const PlaneDetection& detect
                            [&](const Patch& p) { return p.id == ids[r]; });
     if (it == patches_.end()) continue;
     Target& target = targets[r];
+    target.patch = &*it;
     target.samples = &it->samples;
     target.n_C = (T_C_W.linear() * it->normal).cast<float>();
     target.d_C = static_cast<float>(it->offset - it->normal.dot(T_W_C.translation()));
@@ -194,6 +199,13 @@ void PatchMap::addColours(const core::Frame& frame, const PlaneDetection& detect
                    [](const Target& t) { return t.samples != nullptr; })) {
     return;
   }
+  // Scores are logs of the weights: the frame's sharpness and its recency (the weight doubles
+  // every half-life of frames) are added once per frame.
+  const double half_life = config_.recency_half_life_frames;
+  const float frame_score = static_cast<float>(
+      std::log(std::max(sharpness, 1e-6)) +
+      (half_life > 0.0 ? static_cast<double>(frame.index) * std::log(2.0) / half_life : 0.0));
+  const float inverse_fx = static_cast<float>(1.0 / k.fx);
   const int scale = detection.scale;
   for (int y = 0; y < frame.rgb.rows; ++y) {
     const auto* label = detection.labels.ptr<std::uint8_t>(y / scale);
@@ -215,10 +227,29 @@ void PatchMap::addColours(const core::Frame& frame, const PlaneDetection& detect
       sample.u = offset.dot(target.u_C);
       sample.v = offset.dot(target.v_C);
       sample.rgb = {rgb[x][0], rgb[x][1], rgb[x][2]};
-      sample.weight = std::abs(along) / ray_norm / (distance * distance);
+      sample.score =
+          std::log(std::abs(along) / ray_norm / (distance * distance)) + frame_score;
       target.samples->add(sample);
+      target.patch->footprint_sum_m += distance * inverse_fx;
+      target.patch->footprint_pixels += 1;
     }
   }
+}
+
+PatchSnapshot PatchMap::snapshot(const Patch& patch) const {
+  PatchSnapshot snapshot;
+  snapshot.id = patch.id;
+  snapshot.version = patch.version;
+  snapshot.normal = patch.normal;
+  snapshot.offset = patch.offset;
+  snapshot.frame = patch.planeFrame();
+  snapshot.outline = outlineOf(patch);
+  snapshot.samples = patch.samples.all();
+  if (patch.footprint_pixels > 0) {
+    snapshot.pixel_footprint_m =
+        patch.footprint_sum_m / static_cast<double>(patch.footprint_pixels);
+  }
+  return snapshot;
 }
 
 void PatchMap::finalize(Patch& patch, std::vector<PatchEvent>& events) const {

@@ -4,6 +4,7 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <limits>
 #include <unordered_map>
 #include <utility>
 #include <vector>
@@ -11,9 +12,13 @@
 namespace tessera::planes {
 
 struct ColourSample {
+  static constexpr float kEmpty = std::numeric_limits<float>::lowest();
   float u = 0.0F, v = 0.0F;  // position in the patch's plane frame, metres
   std::array<std::uint8_t, 3> rgb{};
-  float weight = 0.0F;  // 0: an empty slot
+  // Natural log of the sample's weight (how close, frontal, sharp and recent its view was):
+  // a log, so that a weight growing with the frame index for recency never overflows, and two
+  // samples' weights compare as exp(score_a - score_b). kEmpty marks an empty slot.
+  float score = kEmpty;
 };
 
 class ColourSamples {
@@ -25,7 +30,7 @@ class ColourSamples {
   ColourSamples(ColourSamples&& other) noexcept { *this = std::move(other); }
   ColourSamples& operator=(ColourSamples&& other) noexcept;
 
-  // Keeps the sample if its cell has a free slot or a lighter sample, which it replaces.
+  // Keeps the sample if its cell has a free slot or a lower-scored sample, which it replaces.
   void add(const ColourSample& sample);
 
   std::size_t size() const { return size_; }

@@ -40,6 +40,9 @@ struct PatchMapConfig {
   // at 30 frames/s neighbouring frames see nearly the same thing, and sampling is the
   // costliest part of the plane stage.
   int colour_every_n_frames = 2;
+  // A sample's weight doubles every recency_half_life_frames frames of the stream, so newer
+  // views win over older ones of equal quality (0: no preference).
+  double recency_half_life_frames = 900.0;
 };
 
 // One detected region in world coordinates.
@@ -63,6 +66,10 @@ struct Patch {
   CellSet cells;
   PointMoments moments;  // of every point ever added, for the least-squares refit
   ColourSamples samples{0.005, 2};
+  // Sum over every coloured pixel of its footprint on the plane (distance / fx, metres), for
+  // the texel size that matches how sharply the sensor saw the patch.
+  double footprint_sum_m = 0.0;
+  std::size_t footprint_pixels = 0;
 
   // Finalization state.
   int version = 0;  // 0: never finalized; each finalization adds one
@@ -81,6 +88,19 @@ struct Patch {
 
   Cell cellOf(const Eigen::Vector3d& X_W, double cell_m) const;
   Eigen::Vector3d cellCentre(const Cell& cell, double cell_m) const;
+};
+
+// A finalized patch as the texturing stage needs it, copied so that it can be textured on
+// another thread while the map goes on changing.
+struct PatchSnapshot {
+  int id = 0;
+  int version = 0;
+  Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();
+  double offset = 0.0;
+  Patch::Frame frame;
+  Outline outline;
+  std::vector<ColourSample> samples;
+  double pixel_footprint_m = 0.0;  // mean footprint of the pixels that coloured it (0: none)
 };
 
 // What changed for downstream stages: a patch (re)finalized as `version`, or a patch that was
@@ -102,9 +122,11 @@ class PatchMap {
 
   // Colours of the frame's pixels in the regions that went to patches `ids` (as add returned
   // them): each pixel's ray meets its patch's plane, weighted by |cos| of the viewing angle
-  // over the squared distance. Needs rgb registered to depth.
+  // over the squared distance, times `sharpness` (SharpnessGauge) and the recency factor.
+  // Needs rgb registered to depth.
   void addColours(const core::Frame& frame, const PlaneDetection& detection,
-                  const core::Isometry& T_W_C, const std::vector<int>& ids);
+                  const core::Isometry& T_W_C, const std::vector<int>& ids,
+                  double sharpness = 1.0);
 
   // Closes frame `frame_index` (patches seen in it are the ones add() touched since the last
   // call) and returns the finalizations and retirements it caused.
@@ -113,6 +135,8 @@ class PatchMap {
   std::vector<PatchEvent> finalizeAll();
 
   const Patch* find(int id) const;
+  // A copy of patch `id` for texturing (its outline traced, its samples listed).
+  PatchSnapshot snapshot(const Patch& patch) const;
   const PatchMapConfig& config() const { return config_; }
   // Whether a region (its least-squares plane and points, world frame) continues `patch`:
   // normal and centroid within the bounds, touching its cells.

@@ -1,0 +1,65 @@
+#pragma once
+// The initial bitmap of a finalized patch: each texel of its TexelGrid gets the weighted mean
+// colour of the nearest colour samples around its centre (a KD-tree over the samples finds
+// them). Texels without samples stay uncoloured and masked; small holes inside the outline
+// may be inpainted from their surroundings and are marked so.
+#include <cstddef>
+
+#include <opencv2/core/mat.hpp>
+
+#include "tessera/core/config.h"
+#include "tessera/planes/patch_map.h"
+#include "tessera/texture/texel_grid.h"
+
+namespace tessera::texture {
+
+struct BitmapConfig {
+  // Texel side, metres. 0: the mean footprint of the pixels that coloured the patch (distance
+  // over fx), clamped to [min_texel_m, max_texel_m], so the bitmap is as sharp as the views.
+  double texel_m = 0.0;
+  double min_texel_m = 0.002;
+  double max_texel_m = 0.02;
+  // Each texel averages at most `neighbours` samples within radius_texels of its centre,
+  // weighted by each sample's view weight times a Gaussian of its distance (sigma_texels).
+  int neighbours = 8;
+  double radius_texels = 1.0;
+  double sigma_texels = 0.5;
+  // Instead of averaging, take the colour of the one sample with the best view weight.
+  bool best_view = false;
+  // Holes inside the outline of at most this many texels, ringed by coloured texels, are
+  // inpainted (0: none).
+  int max_inpaint_texels = 16;
+};
+
+// Reads the `textures:` keys; throws core::ConfigError on a value out of range.
+void readConfig(const core::ConfigSection& section, BitmapConfig& config);
+
+// What each texel of a bitmap holds.
+enum class TexelState : std::uint8_t {
+  kEmpty = 0,        // outside the outline, or no sample near it
+  kInpainted = 128,  // a small hole filled from its neighbours
+  kObserved = 255,   // the mean of observed samples
+};
+
+struct PatchBitmap {
+  int id = 0;
+  int version = 0;
+  TexelGrid grid;  // grid.mask: the outline
+  cv::Mat image;   // CV_8UC3 RGB, black where empty
+  cv::Mat state;   // CV_8UC1 TexelState
+  std::size_t observed = 0, inpainted = 0;
+  double build_ms = 0.0;
+  double area_m2() const { return static_cast<double>(observed) * grid.texel_m * grid.texel_m; }
+};
+
+// The texel size for a patch under `config`.
+double texelSizeFor(const planes::PatchSnapshot& patch, const BitmapConfig& config);
+
+// Builds the bitmap of one patch. Thread-safe: patches are built in parallel.
+PatchBitmap buildBitmap(const planes::PatchSnapshot& patch, const BitmapConfig& config);
+
+// The same bitmap by brute force over every sample (no tree, no inpainting): the slow
+// reference the tests hold buildBitmap to.
+PatchBitmap buildBitmapBruteForce(const planes::PatchSnapshot& patch, const BitmapConfig& config);
+
+}  // namespace tessera::texture

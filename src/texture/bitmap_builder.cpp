@@ -1,0 +1,189 @@
+#include "tessera/texture/bitmap_builder.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <numeric>
+#include <vector>
+
+#include <open3d/geometry/KDTreeFlann.h>
+#include <opencv2/imgproc.hpp>
+#include <opencv2/photo.hpp>
+
+#include "tessera/core/error.h"
+
+namespace tessera::texture {
+
+namespace {
+
+using planes::ColourSample;
+
+// The colour of one texel from its neighbouring samples (indices into `samples`, with squared
+// distances to the texel centre): the view weights exp(score) relative to the best of them,
+// times a Gaussian of the distance; or the single heaviest sample in best-view mode.
+cv::Vec3b texelColour(const std::vector<ColourSample>& samples, const std::vector<int>& indices,
+                      const std::vector<double>& distance2, double two_sigma2, bool best_view) {
+  float best_score = ColourSample::kEmpty;
+  for (int i : indices) best_score = std::max(best_score, samples[i].score);
+  double sum[3] = {0.0, 0.0, 0.0}, total = 0.0, heaviest = -1.0;
+  cv::Vec3b best;
+  for (std::size_t j = 0; j < indices.size(); ++j) {
+    const ColourSample& s = samples[indices[j]];
+    const double w = std::exp(static_cast<double>(s.score - best_score) - distance2[j] / two_sigma2);
+    if (w > heaviest) heaviest = w, best = cv::Vec3b(s.rgb[0], s.rgb[1], s.rgb[2]);
+    for (int c = 0; c < 3; ++c) sum[c] += w * s.rgb[c];
+    total += w;
+  }
+  if (best_view) return best;
+  return {cv::saturate_cast<std::uint8_t>(sum[0] / total),
+          cv::saturate_cast<std::uint8_t>(sum[1] / total),
+          cv::saturate_cast<std::uint8_t>(sum[2] / total)};
+}
+
+PatchBitmap emptyBitmap(const planes::PatchSnapshot& patch, const BitmapConfig& config) {
+  PatchBitmap bitmap;
+  bitmap.id = patch.id;
+  bitmap.version = patch.version;
+  bitmap.grid = principalAxisGrid(patch.outline, texelSizeFor(patch, config));
+  bitmap.image = cv::Mat::zeros(bitmap.grid.height, bitmap.grid.width, CV_8UC3);
+  bitmap.state = cv::Mat::zeros(bitmap.grid.height, bitmap.grid.width, CV_8UC1);
+  return bitmap;
+}
+
+// Visits the centre (in (u, v)) of every texel inside the outline.
+template <typename Visit>
+void forEachTexel(const TexelGrid& grid, Visit visit) {
+  for (int r = 0; r < grid.height; ++r) {
+    const auto* inside = grid.mask.ptr<std::uint8_t>(r);
+    for (int c = 0; c < grid.width; ++c) {
+      if (inside[c] != 0) visit(r, c, grid.uvOf(c + 0.5, r + 0.5));
+    }
+  }
+}
+
+void setObserved(PatchBitmap& bitmap, int r, int c, const cv::Vec3b& colour) {
+  bitmap.image.at<cv::Vec3b>(r, c) = colour;
+  bitmap.state.at<std::uint8_t>(r, c) = static_cast<std::uint8_t>(TexelState::kObserved);
+  ++bitmap.observed;
+}
+
+// Fills the holes inside the outline that are at most max_texels large and ringed by observed
+// texels only (a hole touching the outline's edge or an unobserved area has nothing reliable
+// on one side).
+void inpaintSmallHoles(PatchBitmap& bitmap, int max_texels) {
+  cv::Mat holes = bitmap.grid.mask & (bitmap.state == 0);
+  cv::Mat labels, stats, centroids;
+  const int count = cv::connectedComponentsWithStats(holes, labels, stats, centroids, 4);
+  cv::Mat fill = cv::Mat::zeros(holes.size(), CV_8UC1);
+  const cv::Mat observed = bitmap.state == static_cast<int>(TexelState::kObserved);
+  const cv::Mat cross = cv::getStructuringElement(cv::MORPH_CROSS, cv::Size(3, 3));
+  for (int label = 1; label < count; ++label) {
+    if (stats.at<int>(label, cv::CC_STAT_AREA) > max_texels) continue;
+    const cv::Rect box(stats.at<int>(label, cv::CC_STAT_LEFT) - 1,
+                       stats.at<int>(label, cv::CC_STAT_TOP) - 1,
+                       stats.at<int>(label, cv::CC_STAT_WIDTH) + 2,
+                       stats.at<int>(label, cv::CC_STAT_HEIGHT) + 2);
+    const cv::Rect inside = box & cv::Rect(0, 0, holes.cols, holes.rows);
+    if (inside != box) continue;  // touches the bitmap's border
+    const cv::Mat component = labels(box) == label;
+    cv::Mat ring;
+    cv::dilate(component, ring, cross);
+    ring &= ~component;
+    if (cv::countNonZero(ring & ~observed(box)) > 0) continue;
+    fill(box) |= component;
+  }
+  const int filled = cv::countNonZero(fill);
+  if (filled == 0) return;
+  cv::inpaint(bitmap.image, fill, bitmap.image, 2.0, cv::INPAINT_TELEA);
+  bitmap.state.setTo(static_cast<int>(TexelState::kInpainted), fill);
+  bitmap.inpainted = static_cast<std::size_t>(filled);
+}
+
+}  // namespace
+
+void readConfig(const core::ConfigSection& section, BitmapConfig& config) {
+  section.read("texel_m", config.texel_m);
+  section.read("min_texel_m", config.min_texel_m);
+  section.read("max_texel_m", config.max_texel_m);
+  section.read("neighbours", config.neighbours);
+  section.read("radius_texels", config.radius_texels);
+  section.read("sigma_texels", config.sigma_texels);
+  section.read("best_view", config.best_view);
+  section.read("max_inpaint_texels", config.max_inpaint_texels);
+  if (config.texel_m < 0.0 || config.min_texel_m <= 0.0 || config.max_texel_m < config.min_texel_m) {
+    throw core::ConfigError(
+        "textures: texel_m must be at least 0 (0: automatic), min_texel_m positive and "
+        "max_texel_m at least min_texel_m");
+  }
+  if (config.neighbours < 1 || config.radius_texels <= 0.0 || config.sigma_texels <= 0.0 ||
+      config.max_inpaint_texels < 0) {
+    throw core::ConfigError(
+        "textures: neighbours must be at least 1, radius_texels and sigma_texels positive, "
+        "max_inpaint_texels at least 0");
+  }
+}
+
+double texelSizeFor(const planes::PatchSnapshot& patch, const BitmapConfig& config) {
+  if (config.texel_m > 0.0) return config.texel_m;
+  const double footprint = patch.pixel_footprint_m > 0.0 ? patch.pixel_footprint_m : 0.005;
+  return std::clamp(footprint, config.min_texel_m, config.max_texel_m);
+}
+
+PatchBitmap buildBitmap(const planes::PatchSnapshot& patch, const BitmapConfig& config) {
+  const auto start = std::chrono::steady_clock::now();
+  PatchBitmap bitmap = emptyBitmap(patch, config);
+  const std::vector<ColourSample>& samples = patch.samples;
+  if (!samples.empty()) {
+    Eigen::MatrixXd positions(2, static_cast<Eigen::Index>(samples.size()));
+    for (std::size_t i = 0; i < samples.size(); ++i) {
+      positions.col(static_cast<Eigen::Index>(i)) << samples[i].u, samples[i].v;
+    }
+    const open3d::geometry::KDTreeFlann tree(positions);
+    const double t = bitmap.grid.texel_m;
+    const double radius = config.radius_texels * t;
+    const double two_sigma2 = 2.0 * std::pow(config.sigma_texels * t, 2);
+    Eigen::VectorXd query(2);
+    std::vector<int> indices;
+    std::vector<double> distance2;
+    forEachTexel(bitmap.grid, [&](int r, int c, const Eigen::Vector2d& uv) {
+      query = uv;
+      if (tree.SearchHybrid(query, radius, config.neighbours, indices, distance2) <= 0) return;
+      setObserved(bitmap, r, c,
+                  texelColour(samples, indices, distance2, two_sigma2, config.best_view));
+    });
+  }
+  if (config.max_inpaint_texels > 0) inpaintSmallHoles(bitmap, config.max_inpaint_texels);
+  bitmap.build_ms =
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+  return bitmap;
+}
+
+PatchBitmap buildBitmapBruteForce(const planes::PatchSnapshot& patch,
+                                  const BitmapConfig& config) {
+  PatchBitmap bitmap = emptyBitmap(patch, config);
+  const std::vector<ColourSample>& samples = patch.samples;
+  const double t = bitmap.grid.texel_m;
+  const double radius2 = std::pow(config.radius_texels * t, 2);
+  const double two_sigma2 = 2.0 * std::pow(config.sigma_texels * t, 2);
+  std::vector<int> order(samples.size());
+  forEachTexel(bitmap.grid, [&](int r, int c, const Eigen::Vector2d& uv) {
+    std::vector<double> all(samples.size());
+    for (std::size_t i = 0; i < samples.size(); ++i) {
+      all[i] = (Eigen::Vector2d(samples[i].u, samples[i].v) - uv).squaredNorm();
+    }
+    std::iota(order.begin(), order.end(), 0);
+    std::sort(order.begin(), order.end(), [&](int a, int b) { return all[a] < all[b]; });
+    std::vector<int> indices;
+    std::vector<double> distance2;
+    for (int i : order) {
+      if (all[i] > radius2 || static_cast<int>(indices.size()) == config.neighbours) break;
+      indices.push_back(i);
+      distance2.push_back(all[i]);
+    }
+    if (indices.empty()) return;
+    setObserved(bitmap, r, c, texelColour(samples, indices, distance2, two_sigma2, config.best_view));
+  });
+  return bitmap;
+}
+
+}  // namespace tessera::texture
