@@ -15,7 +15,8 @@ int defaultThreadCount() {
 }
 
 void runGraph(SourceStage& source, TrackingStage& tracking, IntegrationStage& integration,
-              PlaneStage& planes, StatsSink& sink, const GraphOptions& options) {
+              PlaneStage& planes, TextureStage& textures, StatsSink& sink,
+              const GraphOptions& options) {
   const int threads = options.threads > 0 ? options.threads : defaultThreadCount();
   oneapi::tbb::task_arena arena(threads);
   arena.execute([&] {
@@ -39,8 +40,26 @@ void runGraph(SourceStage& source, TrackingStage& tracking, IntegrationStage& in
     flow::function_node<TrackedFrame, FusedFrame> integration_node(
         graph, flow::serial,
         [&](TrackedFrame tracked) { return integration.process(std::move(tracked)); });
-    flow::function_node<FusedFrame, FusedFrame> planes_node(
-        graph, flow::serial, [&](FusedFrame fused) { return planes.process(std::move(fused)); });
+    // The plane stage sends the frame on to the sink and each patch it finalized to texturing.
+    using PlanesNode =
+        flow::multifunction_node<FusedFrame, std::tuple<FusedFrame, planes::PatchSnapshot>>;
+    PlanesNode planes_node(graph, flow::serial, [&](FusedFrame fused, PlanesNode::output_ports_type& out) {
+      fused = planes.process(std::move(fused));
+      for (planes::PatchSnapshot& patch : fused.finalized_patches) {
+        std::get<1>(out).try_put(std::move(patch));
+      }
+      fused.finalized_patches.clear();
+      std::get<0>(out).try_put(std::move(fused));
+    });
+    // Bitmaps are independent: as many are built at once as there are free threads.
+    flow::function_node<planes::PatchSnapshot, texture::PatchBitmap> texture_node(
+        graph, flow::unlimited,
+        [&](const planes::PatchSnapshot& patch) { return textures.build(patch); });
+    flow::function_node<texture::PatchBitmap, flow::continue_msg> bitmap_store_node(
+        graph, flow::serial, [&](texture::PatchBitmap bitmap) {
+          textures.keep(std::move(bitmap));
+          return flow::continue_msg{};
+        });
     flow::function_node<FusedFrame, flow::continue_msg> sink_node(graph, flow::serial,
                                                                   [&](const FusedFrame& fused) {
                                                                     sink.process(fused);
@@ -51,14 +70,20 @@ void runGraph(SourceStage& source, TrackingStage& tracking, IntegrationStage& in
     flow::make_edge(limiter, tracking_node);
     flow::make_edge(tracking_node, integration_node);
     flow::make_edge(integration_node, planes_node);
-    flow::make_edge(planes_node, sink_node);
+    flow::make_edge(flow::output_port<0>(planes_node), sink_node);
+    flow::make_edge(flow::output_port<1>(planes_node), texture_node);
+    flow::make_edge(texture_node, bitmap_store_node);
     flow::make_edge(sink_node, limiter.decrementer());
 
     source_node.activate();
     graph.wait_for_all();
+
+    // End of stream: the patches still live are finalized and textured like the others.
+    std::vector<planes::PatchSnapshot> finalized;
+    sink.writePatchEvents(planes.finish(finalized));
+    for (planes::PatchSnapshot& patch : finalized) texture_node.try_put(std::move(patch));
+    graph.wait_for_all();
   });
-  // End of stream: flush in topological order.
-  sink.writePatchEvents(planes.finish());
   sink.flush();
 }
 

@@ -12,6 +12,7 @@
 #include "tessera/core/error.h"
 #include "tessera/pipeline/flow_graph.h"
 #include "tessera/planes/patch_export.h"
+#include "tessera/texture/bitmap_export.h"
 
 namespace tessera::pipeline {
 
@@ -52,10 +53,11 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
   planes::PlaneAlignmentConfig alignment = config.pose_correction;
   alignment.enabled = alignment.enabled && options.poses == PoseSource::kTrack;
   PlaneStage plane_stage(config.planes, config.patches, alignment);
+  TextureStage texture_stage(config.textures);
   StatsSink sink(options.out_dir, total, options.on_progress);
 
   const auto start = std::chrono::steady_clock::now();
-  runGraph(source_stage, tracking_stage, integration_stage, plane_stage, sink,
+  runGraph(source_stage, tracking_stage, integration_stage, plane_stage, texture_stage, sink,
            {threads, config.pipeline.max_frames_in_flight});
   const double wall_s =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
@@ -79,6 +81,7 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
                     figures("tracking", tracking_stage.timer()),
                     figures("integration", integration_stage.timer()),
                     figures("planes", plane_stage.timer()),
+                    figures("textures", texture_stage.timer()),
                     figures("sink", sink.timer())};
 
   // Export: the mesh is written even when the source ended abnormally, so work is kept.
@@ -93,8 +96,19 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
     summary.colour_samples += patch.samples.size();
     summary.colour_sample_bytes += patch.samples.bytes();
   }
-  planes::writePatchesObj(patches, options.out_dir / "patches.obj");
-  planes::writePatchesJson(patches, options.out_dir / "patches.json");
+  const planes::TextureBindings textures =
+      texture::writeBitmaps(texture_stage.bitmaps(), patches, options.out_dir);
+  for (const auto& [id, binding] : textures) {
+    summary.bitmaps += 1;
+    summary.bitmap_texels_observed += binding.observed;
+    summary.bitmap_texels_inpainted += binding.inpainted;
+    summary.bitmap_bytes += 3 * static_cast<std::size_t>(binding.width) * binding.height;
+  }
+  if (texture_stage.areaBuiltM2() > 0.0) {
+    summary.bitmap_ms_per_m2 = texture_stage.timer().totalMs() / texture_stage.areaBuiltM2();
+  }
+  planes::writePatchesObj(patches, options.out_dir / "patches.obj", textures);
+  planes::writePatchesJson(patches, options.out_dir / "patches.json", textures);
   summary.peak_rss_mb = peakRssMb();
   writeReport(summary, options.out_dir / "report.json");
   return summary;
@@ -123,6 +137,11 @@ void writeReport(const RunSummary& summary, const std::filesystem::path& path) {
       {"patches_retired", summary.patches_retired},
       {"colour_samples", summary.colour_samples},
       {"colour_sample_bytes", summary.colour_sample_bytes},
+      {"bitmaps", summary.bitmaps},
+      {"bitmap_texels_observed", summary.bitmap_texels_observed},
+      {"bitmap_texels_inpainted", summary.bitmap_texels_inpainted},
+      {"bitmap_bytes", summary.bitmap_bytes},
+      {"bitmap_ms_per_m2", summary.bitmap_ms_per_m2},
   };
   report["ate_m"] = summary.ate ? json(summary.ate->rmse_m) : json(nullptr);
   report["ate_max_m"] = summary.ate ? json(summary.ate->max_m) : json(nullptr);

@@ -22,6 +22,7 @@ RunConfig readRunConfig(const core::ConfigDocument& doc) {
     planes::readConfig(root.section("planes"), config.planes);
     planes::readConfig(root.section("patches"), config.patches);
     planes::readConfig(root.section("pose_correction"), config.pose_correction);
+    texture::readConfig(root.section("textures"), config.textures);
   } catch (const core::ConfigError& e) {
     const std::string message = e.what();
     // Range checks inside the stages do not know the file; add it.

@@ -143,7 +143,7 @@ void PlaneStage::sampleColours(const core::Frame& frame, const planes::PlaneDete
       if (patch == nullptr || patch->samples.size() >= kFewSamples) id = -1;
     }
   }
-  map_.addColours(frame, detection, T_W_C, ids);
+  map_.addColours(frame, detection, T_W_C, ids, sharpness_.measure(frame.rgb));
 }
 
 void PlaneStage::count(const std::vector<planes::PatchEvent>& events) {
@@ -179,16 +179,45 @@ FusedFrame PlaneStage::process(FusedFrame fused) {
     fused.patch_events = map_.endFrame(static_cast<long>(fused.frame.index));
   }
   count(fused.patch_events);
+  fused.finalized_patches = snapshotsOf(fused.patch_events);
   fused.planes_ms = timer_.lastMs();
   fused.patches_live = map_.liveCount();
   fused.patches_finalized = map_.finalizedCount();
   return fused;
 }
 
-std::vector<planes::PatchEvent> PlaneStage::finish() {
+std::vector<planes::PatchEvent> PlaneStage::finish(
+    std::vector<planes::PatchSnapshot>& finalized) {
   std::vector<planes::PatchEvent> events = map_.finalizeAll();
   count(events);
+  finalized = snapshotsOf(events);
   return events;
+}
+
+std::vector<planes::PatchSnapshot> PlaneStage::snapshotsOf(
+    const std::vector<planes::PatchEvent>& events) const {
+  std::vector<planes::PatchSnapshot> snapshots;
+  for (const planes::PatchEvent& event : events) {
+    if (event.kind != planes::PatchEvent::Kind::kFinalized) continue;
+    if (const planes::Patch* patch = map_.find(event.id)) snapshots.push_back(map_.snapshot(*patch));
+  }
+  return snapshots;
+}
+
+texture::PatchBitmap TextureStage::build(const planes::PatchSnapshot& patch) const {
+  return texture::buildBitmap(patch, config_);
+}
+
+void TextureStage::keep(texture::PatchBitmap bitmap) {
+  timer_.add(bitmap.build_ms);
+  area_built_m2_ += bitmap.area_m2();
+  auto it = bitmaps_.find(bitmap.id);
+  // Versions of one patch may be built out of order; the newest wins.
+  if (it == bitmaps_.end()) {
+    bitmaps_.emplace(bitmap.id, std::move(bitmap));
+  } else if (it->second.version < bitmap.version) {
+    it->second = std::move(bitmap);
+  }
 }
 
 StatsSink::StatsSink(const std::filesystem::path& out_dir, std::optional<std::size_t> frames_total,

@@ -1,5 +1,6 @@
 #include "tessera/planes/patch_export.h"
 
+#include <algorithm>
 #include <fstream>
 
 #include <fmt/format.h>
@@ -33,22 +34,65 @@ nlohmann::json polygonJson(const Polygon2& polygon) {
 }
 
 nlohmann::json vectorJson(const Eigen::Vector3d& v) { return {v.x(), v.y(), v.z()}; }
+nlohmann::json vectorJson(const Eigen::Vector2d& v) { return {v.x(), v.y()}; }
+
+// The texture of the patch's current version, if there is one.
+const TextureBinding* textureOf(const Patch& patch, const TextureBindings& textures) {
+  const auto it = textures.find(patch.id);
+  return it != textures.end() && it->second.version == patch.version ? &it->second : nullptr;
+}
+
+// OBJ texture coordinates of plane point (u, v): the texel grid scaled to [0, 1], with the
+// image's first row at the top (OBJ's t axis points up); clamped, since the cell quads may
+// reach half a cell beyond the grid.
+Eigen::Vector2d textureCoordinates(const TextureBinding& texture, double u, double v) {
+  const Eigen::Vector2d d = Eigen::Vector2d(u, v) - texture.origin_uv;
+  const double s = d.dot(texture.x_axis) / texture.texel_m / texture.width;
+  const double t = 1.0 - d.dot(texture.y_axis) / texture.texel_m / texture.height;
+  return {std::clamp(s, 0.0, 1.0), std::clamp(t, 0.0, 1.0)};
+}
+
+void writeMaterials(const PatchMap& map, const TextureBindings& textures,
+                    const std::filesystem::path& path) {
+  std::ofstream out = openForWriting(path);
+  out << "# tessera patch textures\n";
+  for (const Patch& patch : map.patches()) {
+    const TextureBinding* texture = patch.finalized ? textureOf(patch, textures) : nullptr;
+    if (texture == nullptr) continue;
+    out << fmt::format("newmtl patch_{}\nKa 1 1 1\nKd 1 1 1\nKs 0 0 0\nillum 1\nmap_Kd {}\n"
+                       "map_d {}\n\n",
+                       patch.id, texture->image, texture->image);
+  }
+  checkWritten(out, path);
+}
 
 }  // namespace
 
-void writePatchesObj(const PatchMap& map, const std::filesystem::path& path) {
+void writePatchesObj(const PatchMap& map, const std::filesystem::path& path,
+                     const TextureBindings& textures) {
+  std::filesystem::path materials = path;
+  materials.replace_extension(".mtl");
+  writeMaterials(map, textures, materials);
   std::ofstream out = openForWriting(path);
-  out << "# tessera finalized planar patches (untextured)\n";
+  out << "# tessera finalized planar patches\n";
+  out << "mtllib " << materials.filename().string() << '\n';
   const double cell = map.config().cell_m;
   std::size_t vertices = 0;
   for (const Patch& patch : map.patches()) {
     if (!patch.finalized) continue;
     const Outline outline = map.outlineOf(patch);
     const Patch::Frame frame = patch.planeFrame();
+    const TextureBinding* texture = textureOf(patch, textures);
     out << fmt::format("o patch_{}_v{}\n", patch.id, patch.version);
+    if (texture != nullptr) out << fmt::format("usemtl patch_{}\n", patch.id);
+    // Every vertex gets a texture coordinate (0, 0 on untextured patches), so that vertex and
+    // texture-coordinate indices stay equal through the file.
     auto vertex = [&](double u, double v) {
       const Eigen::Vector3d X = toWorld(frame, u, v);
-      out << fmt::format("v {:.4f} {:.4f} {:.4f}\n", X.x(), X.y(), X.z());
+      const Eigen::Vector2d st =
+          texture != nullptr ? textureCoordinates(*texture, u, v) : Eigen::Vector2d::Zero();
+      out << fmt::format("v {:.4f} {:.4f} {:.4f}\nvt {:.5f} {:.5f}\n", X.x(), X.y(), X.z(),
+                         st.x(), st.y());
       return ++vertices;
     };
     for (int r = 0; r < outline.grid.rows; ++r) {
@@ -66,7 +110,7 @@ void writePatchesObj(const PatchMap& map, const std::filesystem::path& path) {
         const double v1 = v0 + cell;
         const std::size_t a = vertex(u0, v0), b = vertex(u1, v0), d = vertex(u1, v1),
                           e = vertex(u0, v1);
-        out << fmt::format("f {} {} {} {}\n", a, b, d, e);
+        out << fmt::format("f {0}/{0} {1}/{1} {2}/{2} {3}/{3}\n", a, b, d, e);
       }
     }
     auto polyline = [&](const Polygon2& polygon) {
@@ -84,7 +128,8 @@ void writePatchesObj(const PatchMap& map, const std::filesystem::path& path) {
   checkWritten(out, path);
 }
 
-void writePatchesJson(const PatchMap& map, const std::filesystem::path& path) {
+void writePatchesJson(const PatchMap& map, const std::filesystem::path& path,
+                      const TextureBindings& textures) {
   nlohmann::json patches = nlohmann::json::array();
   for (const Patch& patch : map.patches()) {
     if (!patch.finalized) continue;
@@ -96,6 +141,19 @@ void writePatchesJson(const PatchMap& map, const std::filesystem::path& path) {
       for (const Polygon2& hole : part.holes) holes.push_back(polygonJson(hole));
       parts.push_back({{"outer", polygonJson(part.outer)}, {"holes", holes}});
     }
+    nlohmann::json texture_json = nullptr;
+    if (const TextureBinding* texture = textureOf(patch, textures)) {
+      texture_json = {{"image", texture->image},
+                      {"state_image", texture->state_image},
+                      {"texel_m", texture->texel_m},
+                      {"origin_uv", vectorJson(texture->origin_uv)},
+                      {"x_axis", vectorJson(texture->x_axis)},
+                      {"y_axis", vectorJson(texture->y_axis)},
+                      {"width", texture->width},
+                      {"height", texture->height},
+                      {"observed", texture->observed},
+                      {"inpainted", texture->inpainted}};
+    }
     patches.push_back({{"id", patch.id},
                        {"version", patch.version},
                        {"normal", vectorJson(patch.normal)},
@@ -105,7 +163,8 @@ void writePatchesJson(const PatchMap& map, const std::filesystem::path& path) {
                        {"v_axis", vectorJson(frame.v_axis)},
                        {"area_m2", outline.area_m2},
                        {"colour_samples", patch.samples.size()},
-                       {"outline", parts}});
+                       {"outline", parts},
+                       {"texture", texture_json}});
   }
   std::ofstream out = openForWriting(path);
   out << nlohmann::json{{"format", "tessera patches 1"},

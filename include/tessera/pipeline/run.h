@@ -49,6 +49,12 @@ struct RunSummary {
   std::size_t patches_retired = 0;       // finalized, then merged into another patch
   std::size_t colour_samples = 0;        // held by all patches at the end
   std::size_t colour_sample_bytes = 0;
+  // Bitmaps of the finalized patches (their current versions), as exported.
+  std::size_t bitmaps = 0;
+  std::size_t bitmap_texels_observed = 0;
+  std::size_t bitmap_texels_inpainted = 0;
+  std::size_t bitmap_bytes = 0;         // 3 bytes per texel of the grids, as held in memory
+  double bitmap_ms_per_m2 = 0.0;        // build time over observed area, every version built
   // ATE of the fused poses against the recording's ground truth, when it has one.
   std::optional<eval::AteResult> ate;
   std::vector<StageFigures> stages;

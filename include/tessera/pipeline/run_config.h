@@ -9,6 +9,7 @@
 #include "tessera/planes/patch_map.h"
 #include "tessera/planes/plane_alignment.h"
 #include "tessera/planes/plane_detector.h"
+#include "tessera/texture/bitmap_builder.h"
 
 namespace tessera::pipeline {
 
@@ -25,6 +26,7 @@ struct RunConfig {
   planes::PlaneDetectorConfig planes;
   planes::PatchMapConfig patches;
   planes::PlaneAlignmentConfig pose_correction;
+  texture::BitmapConfig textures;
 };
 
 // Reads every section of `doc` into a RunConfig and rejects unknown keys.

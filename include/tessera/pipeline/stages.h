@@ -7,6 +7,7 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <map>
 #include <optional>
 #include <string>
 
@@ -17,7 +18,9 @@
 #include "tessera/pipeline/stage_timer.h"
 #include "tessera/planes/patch_map.h"
 #include "tessera/planes/plane_alignment.h"
+#include "tessera/planes/frame_sharpness.h"
 #include "tessera/planes/plane_detector.h"
+#include "tessera/texture/bitmap_builder.h"
 
 namespace tessera::pipeline {
 
@@ -75,6 +78,8 @@ struct FusedFrame {
   std::size_t patches_live = 0;
   std::size_t patches_finalized = 0;
   std::vector<planes::PatchEvent> patch_events;
+  // A copy of each patch finalized in this frame, for the texturing stage.
+  std::vector<planes::PatchSnapshot> finalized_patches;
 };
 
 // Registers colour to depth and gives each frame its pose: tracked, or the ground truth. A
@@ -129,8 +134,9 @@ class PlaneStage {
              const planes::PlaneAlignmentConfig& alignment);
 
   FusedFrame process(FusedFrame fused);
-  // End of stream: finalizes every remaining patch above the area bound.
-  std::vector<planes::PatchEvent> finish();
+  // End of stream: finalizes every remaining patch above the area bound; `finalized` gets a
+  // copy of each for texturing.
+  std::vector<planes::PatchEvent> finish(std::vector<planes::PatchSnapshot>& finalized);
 
   const planes::PatchMap& map() const { return map_; }
   std::size_t finalizations() const { return finalizations_; }  // versions included
@@ -139,6 +145,7 @@ class PlaneStage {
 
  private:
   void count(const std::vector<planes::PatchEvent>& events);
+  std::vector<planes::PatchSnapshot> snapshotsOf(const std::vector<planes::PatchEvent>& events) const;
   // Every N-th frame (patches.colour_every_n_frames), and any frame the camera has moved
   // more than 5 cm or 3 degrees from since the last one sampled.
   bool wantsColours(std::uint64_t index, const core::Isometry& T_W_C) const;
@@ -149,12 +156,35 @@ class PlaneStage {
 
   planes::PlaneDetector detector_;
   planes::PatchMap map_;
+  planes::SharpnessGauge sharpness_;
   std::optional<core::Isometry> last_colour_pose_;
   planes::PlaneAlignmentConfig alignment_;
   core::Isometry correction_ = core::Isometry::Identity();  // world drift, carried frame to frame
   std::size_t finalizations_ = 0;
   std::size_t retirements_ = 0;
   StageTimer timer_;
+};
+
+// Builds the bitmap of each finalized patch (many at once: build() is thread-safe) and keeps
+// the newest version of each patch's bitmap (keep(), called by one node at a time).
+class TextureStage {
+ public:
+  explicit TextureStage(const texture::BitmapConfig& config) : config_(config) {}
+
+  texture::PatchBitmap build(const planes::PatchSnapshot& patch) const;
+  void keep(texture::PatchBitmap bitmap);
+
+  // The newest bitmap of each patch id.
+  const std::map<int, texture::PatchBitmap>& bitmaps() const { return bitmaps_; }
+  // Build time of each bitmap, and their total area (m^2 of observed texels).
+  const StageTimer& timer() const { return timer_; }
+  double areaBuiltM2() const { return area_built_m2_; }
+
+ private:
+  texture::BitmapConfig config_;
+  std::map<int, texture::PatchBitmap> bitmaps_;
+  StageTimer timer_;
+  double area_built_m2_ = 0.0;
 };
 
 // What the sink tells a progress display after each frame.

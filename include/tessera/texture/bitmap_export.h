@@ -1,0 +1,28 @@
+#pragma once
+// Patch bitmaps as files: an RGBA PNG per patch (alpha 0 where the bitmap has no colour) and a
+// grey PNG of each texel's state, under OUT/textures/.
+#include <filesystem>
+#include <map>
+
+#include "tessera/planes/patch_export.h"
+#include "tessera/texture/bitmap_builder.h"
+
+namespace tessera::texture {
+
+// Writes out_dir/textures/patch_<id>.png and patch_<id>_state.png for each bitmap whose patch
+// is finalized in `map` at the bitmap's version, and returns where each lies on its patch (for
+// patches.obj and patches.json). Throws core::Error naming a file that cannot be written.
+planes::TextureBindings writeBitmaps(const std::map<int, PatchBitmap>& bitmaps,
+                                     const planes::PatchMap& map,
+                                     const std::filesystem::path& out_dir);
+
+// The placement of a bitmap on its patch, with the image names given.
+planes::TextureBinding bindingOf(const PatchBitmap& bitmap, const std::string& image,
+                                 const std::string& state_image);
+
+// Reads a bitmap written by writeBitmaps back: the RGB image and the state, from the two
+// PNGs (paths given). Throws core::Error naming a file that is missing or not such a PNG.
+void readBitmapImages(const std::filesystem::path& image, const std::filesystem::path& state_image,
+                      cv::Mat& rgb, cv::Mat& state);
+
+}  // namespace tessera::texture

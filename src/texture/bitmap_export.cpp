@@ -1,0 +1,80 @@
+#include "tessera/texture/bitmap_export.h"
+
+#include <fmt/format.h>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "tessera/core/error.h"
+
+namespace tessera::texture {
+
+namespace {
+
+void writePng(const std::filesystem::path& path, const cv::Mat& image) {
+  bool written = false;
+  try {
+    written = cv::imwrite(path.string(), image);
+  } catch (const cv::Exception& e) {
+    throw core::Error(fmt::format("{}: could not be written: {}", path.string(), e.what()));
+  }
+  if (!written) throw core::Error(fmt::format("{}: could not be written (disk full?)", path.string()));
+}
+
+}  // namespace
+
+planes::TextureBinding bindingOf(const PatchBitmap& bitmap, const std::string& image,
+                                 const std::string& state_image) {
+  planes::TextureBinding binding;
+  binding.version = bitmap.version;
+  binding.image = image;
+  binding.state_image = state_image;
+  binding.texel_m = bitmap.grid.texel_m;
+  binding.origin_uv = bitmap.grid.origin_uv;
+  binding.x_axis = bitmap.grid.x_axis;
+  binding.y_axis = bitmap.grid.y_axis;
+  binding.width = bitmap.grid.width;
+  binding.height = bitmap.grid.height;
+  binding.observed = bitmap.observed;
+  binding.inpainted = bitmap.inpainted;
+  return binding;
+}
+
+planes::TextureBindings writeBitmaps(const std::map<int, PatchBitmap>& bitmaps,
+                                     const planes::PatchMap& map,
+                                     const std::filesystem::path& out_dir) {
+  const std::filesystem::path folder = out_dir / "textures";
+  std::error_code ec;
+  std::filesystem::create_directories(folder, ec);
+  if (ec) throw core::Error(fmt::format("{}: cannot be created: {}", folder.string(), ec.message()));
+  planes::TextureBindings bindings;
+  for (const auto& [id, bitmap] : bitmaps) {
+    const planes::Patch* patch = map.find(id);
+    if (patch == nullptr || !patch->finalized || patch->version != bitmap.version) continue;
+    const std::string image = fmt::format("textures/patch_{}.png", id);
+    const std::string state = fmt::format("textures/patch_{}_state.png", id);
+    cv::Mat bgra;
+    cv::cvtColor(bitmap.image, bgra, cv::COLOR_RGB2BGRA);
+    cv::Mat alpha = bitmap.state != static_cast<int>(TexelState::kEmpty);
+    cv::insertChannel(alpha, bgra, 3);
+    writePng(out_dir / image, bgra);
+    writePng(out_dir / state, bitmap.state);
+    bindings.emplace(id, bindingOf(bitmap, image, state));
+  }
+  return bindings;
+}
+
+void readBitmapImages(const std::filesystem::path& image, const std::filesystem::path& state_image,
+                      cv::Mat& rgb, cv::Mat& state) {
+  const cv::Mat bgra = cv::imread(image.string(), cv::IMREAD_UNCHANGED);
+  if (bgra.empty() || bgra.type() != CV_8UC4) {
+    throw core::Error(fmt::format("{}: missing or not an RGBA PNG", image.string()));
+  }
+  cv::cvtColor(bgra, rgb, cv::COLOR_BGRA2RGB);
+  state = cv::imread(state_image.string(), cv::IMREAD_UNCHANGED);
+  if (state.empty() || state.type() != CV_8UC1 || state.size() != rgb.size()) {
+    throw core::Error(fmt::format("{}: missing, not a grey PNG or not the size of {}",
+                                  state_image.string(), image.string()));
+  }
+}
+
+}  // namespace tessera::texture
