@@ -2,6 +2,7 @@
 
 #include <chrono>
 
+#include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
 #include "progress_line.h"
@@ -127,6 +128,9 @@ CLI::App* addSynthCommand(CLI::App& app, RecordArguments& args) {
   synth->add_option("OUT", args.output, "The .oni file to write (ground truth: OUT.gt.json)")
       ->required();
   addCodecOptions(synth, args);
+  synth->add_option("--sensor", args.sensor,
+                    "Sensor profile instead of the scene's: " +
+                        drivers::synthetic::SensorProfile::knownNames());
   synth
       ->add_option("--max-frames", args.source_args.max_frames,
                    "Render only this many frames (0: all)")
@@ -137,6 +141,13 @@ CLI::App* addSynthCommand(CLI::App& app, RecordArguments& args) {
 int synthCommand(const RecordArguments& args) {
   try {
     drivers::synthetic::SyntheticSource source(args.source);
+    if (!args.sensor.empty()) {
+      try {
+        source.useSensor(drivers::synthetic::SensorProfile::named(args.sensor));
+      } catch (const core::ConfigError& e) {
+        throw core::Error(fmt::format("--sensor: {}", e.what()));
+      }
+    }
     return recordFrames(source, args, drivers::synthetic::sceneGroundTruth(source.scene()));
   } catch (const core::Error& e) {
     spdlog::error("{}", e.what());

@@ -15,6 +15,7 @@ struct RecordArguments {
   std::string depth_codec = "16zT";
   std::string colour_codec = "jpeg";
   int jpeg_quality = 90;
+  std::string sensor;  // synth: a named sensor profile instead of the scene's
   SourceArguments source_args;
 };
 

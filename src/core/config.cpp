@@ -164,6 +164,13 @@ bool ConfigSection::has(std::string_view key) const {
 
 const std::string& ConfigSection::origin() const { return document_->origin; }
 
+std::string ConfigSection::toYaml() const {
+  const YAML::Node node = path_.empty() ? document_->root : lookup(document_->root, path_);
+  YAML::Emitter out;
+  out << YAML::Flow << node;
+  return out.c_str();
+}
+
 std::vector<ConfigSection> ConfigSection::list(std::string_view key) const {
   const std::string path = joinPath(path_, key);
   const YAML::Node node = lookup(document_->root, path);

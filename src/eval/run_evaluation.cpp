@@ -3,10 +3,15 @@
 #include <algorithm>
 #include <fstream>
 
+#include <memory>
+
 #include <fmt/format.h>
+#include <spdlog/spdlog.h>
 
 #include "tessera/core/error.h"
 #include "tessera/eval/plane_evaluation.h"
+#include "tessera/eval/texture_evaluation.h"
+#include "tessera/fusion/mesh_colours.h"
 #include "tessera/eval/trajectory.h"
 
 namespace tessera::eval {
@@ -65,6 +70,34 @@ void addPlaneFigures(const PlaneEvaluation& planes, nlohmann::json& figures) {
   figures["planes"] = per_plane;
 }
 
+void addTextureFigures(const TextureEvaluation& textures, nlohmann::json& figures) {
+  using nlohmann::json;
+  auto optional = [](const std::optional<double>& v) { return v ? json(*v) : json(nullptr); };
+  figures["gt_psnr_mean"] = optional(textures.psnr_mean_db);
+  figures["gt_psnr_min"] = optional(textures.psnr_min_db);
+  figures["gt_psnr_texels"] = textures.texels;
+  figures["gt_psnr_tsdf_baseline_mean"] = optional(textures.baseline_psnr_mean_db);
+  json per_patch = json::array();
+  for (const PatchTextureResult& p : textures.patches) {
+    per_patch.push_back({{"patch", p.patch_id},
+                         {"plane", p.plane},
+                         {"texels", p.texels},
+                         {"psnr_db", p.psnr_db},
+                         {"tsdf_baseline_psnr_db", optional(p.baseline_psnr_db)}});
+  }
+  figures["textures"] = per_patch;
+}
+
+// The TSDF mesh of the run, for the baseline PSNR; nothing (with a warning) when unreadable.
+std::unique_ptr<fusion::MeshColourSampler> meshBaseline(const std::filesystem::path& run_dir) {
+  try {
+    return std::make_unique<fusion::MeshColourSampler>(fusion::readPly(run_dir / "mesh.ply"));
+  } catch (const core::Error& e) {
+    spdlog::warn("no TSDF baseline for the texture PSNR: {}", e.what());
+    return nullptr;
+  }
+}
+
 }  // namespace
 
 nlohmann::json evaluateRun(const std::filesystem::path& run_dir,
@@ -102,8 +135,21 @@ nlohmann::json evaluateRun(const std::filesystem::path& run_dir,
     }
     addPlaneFigures(planes, figures);
   }
+  figures["gt_psnr_mean"] = nullptr;
+  if (gt.contains("planes") && gt.contains("textures") && std::filesystem::exists(patches_path)) {
+    const auto baseline = meshBaseline(run_dir);
+    try {
+      addTextureFigures(evaluateTextures(gt, ground_truth.parent_path(), truth_poses,
+                                         readJson(patches_path), run_dir, T_gt_est,
+                                         baseline.get()),
+                        figures);
+    } catch (const core::Error& e) {
+      throw core::Error(fmt::format("{} against {}: {}", patches_path.string(),
+                                    ground_truth.string(), e.what()));
+    }
+  }
   // Figures of stages that do not exist yet stay null (docs/METRICS.md).
-  for (const char* key : {"false_match_rate", "missed_match_rate", "economy", "gt_psnr_mean"}) {
+  for (const char* key : {"false_match_rate", "missed_match_rate", "economy"}) {
     figures[key] = nullptr;
   }
   figures["ground_truth"] = ground_truth.string();

@@ -138,6 +138,7 @@ PatchBitmap buildBitmap(const planes::PatchSnapshot& patch, const BitmapConfig& 
     for (std::size_t i = 0; i < samples.size(); ++i) {
       positions.col(static_cast<Eigen::Index>(i)) << samples[i].u, samples[i].v;
     }
+    // The tree searches `positions` in place (Open3D 0.16): it must outlive the tree.
     const open3d::geometry::KDTreeFlann tree(positions);
     const double t = bitmap.grid.texel_m;
     const double radius = config.radius_texels * t;

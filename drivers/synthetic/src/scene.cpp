@@ -224,6 +224,7 @@ Scene loadScene(const std::filesystem::path& path) {
                                           path.string(), entry.path()));
     }
     scene.textures[id] = makeTexture(entry, dir);
+    scene.texture_definitions[id] = entry.toYaml();
   }
   for (const auto& entry : root.list("planes")) scene.planes.push_back(readPlane(scene, entry));
   for (const auto& entry : root.list("boxes")) {

@@ -19,6 +19,11 @@ nlohmann::json sceneGroundTruth(const Scene& scene) {
         lattice ? nlohmann::json{vec((*lattice)[0]), vec((*lattice)[1])} : nlohmann::json(nullptr);
     const auto extent = texture->extent();
     entry["extent_m"] = extent ? vec(*extent) : nlohmann::json(nullptr);
+    // The scene entry itself, so that evaluation can rebuild the exact texture.
+    const auto definition = scene.texture_definitions.find(id);
+    entry["definition_yaml"] = definition != scene.texture_definitions.end()
+                                   ? nlohmann::json(definition->second)
+                                   : nlohmann::json(nullptr);
     textures.push_back(entry);
   }
 

@@ -32,6 +32,9 @@ class ConfigSection {
 
   bool has(std::string_view key) const;
 
+  // This section as YAML text (to record a definition verbatim, e.g. in ground truth).
+  std::string toYaml() const;
+
   // The sub-map under `key` (empty when absent).
   ConfigSection section(std::string_view key) const;
   // The maps of a list under `key` (empty when absent), addressed as key[i] in messages.

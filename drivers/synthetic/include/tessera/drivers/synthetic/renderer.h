@@ -27,6 +27,13 @@ class SyntheticSource : public core::FrameSource {
     return static_cast<std::size_t>(scene_.frames);
   }
   const Scene& scene() const { return scene_; }
+  // Renders with another sensor profile than the scene file names (its colour registration
+  // setting is kept).
+  void useSensor(const SensorProfile& sensor) {
+    const bool registered = scene_.sensor.colour_registered;
+    scene_.sensor = sensor;
+    scene_.sensor.colour_registered = registered;
+  }
 
  private:
   std::string name_;

@@ -61,6 +61,7 @@ struct Scene {
   double fps = 30.0;
   SensorProfile sensor;
   std::map<std::string, std::unique_ptr<Texture>> textures;
+  std::map<std::string, std::string> texture_definitions;  // each texture's scene entry, YAML
   std::vector<ScenePlane> planes;
   std::vector<SceneSphere> spheres;
   std::vector<SceneCylinder> cylinders;
