@@ -75,6 +75,7 @@ void addTextureFigures(const TextureEvaluation& textures, nlohmann::json& figure
   auto optional = [](const std::optional<double>& v) { return v ? json(*v) : json(nullptr); };
   figures["gt_psnr_mean"] = optional(textures.psnr_mean_db);
   figures["gt_psnr_min"] = optional(textures.psnr_min_db);
+  figures["gt_psnr_registered_mean"] = optional(textures.registered_psnr_mean_db);
   figures["gt_psnr_texels"] = textures.texels;
   figures["gt_psnr_tsdf_baseline_mean"] = optional(textures.baseline_psnr_mean_db);
   json per_patch = json::array();
@@ -83,6 +84,8 @@ void addTextureFigures(const TextureEvaluation& textures, nlohmann::json& figure
                          {"plane", p.plane},
                          {"texels", p.texels},
                          {"psnr_db", p.psnr_db},
+                         {"registered_psnr_db", p.registered_psnr_db},
+                         {"shift_m", p.shift_m},
                          {"tsdf_baseline_psnr_db", optional(p.baseline_psnr_db)}});
   }
   figures["textures"] = per_patch;

@@ -4,12 +4,12 @@
 #include <cmath>
 #include <map>
 #include <memory>
-#include <mutex>
 
 #include <Eigen/Geometry>
 #include <fmt/format.h>
 #include <opencv2/core.hpp>
 #include <opencv2/core/utility.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "tessera/core/config.h"
 #include "tessera/core/error.h"
@@ -105,16 +105,124 @@ double psnrOf(double squared_error, std::size_t values) {
   return mse <= 0.0 ? 99.0 : 10.0 * std::log10(255.0 * 255.0 / mse);
 }
 
-struct Sums {
-  double squared = 0.0, baseline_squared = 0.0;
-  std::size_t texels = 0, baseline_texels = 0;
-  std::map<int, std::size_t> plane_votes;
-  void add(const Sums& other) {
-    squared += other.squared, baseline_squared += other.baseline_squared;
-    texels += other.texels, baseline_texels += other.baseline_texels;
-    for (const auto& [plane, votes] : other.plane_votes) plane_votes[plane] += votes;
-  }
+// The true colour of each observed texel, averaged over its area, or nothing (plane -1) where
+// the texel spans two true surfaces or none.
+struct TruthImage {
+  cv::Mat colour;  // CV_32FC3
+  cv::Mat plane;   // CV_32SC1: index into the true planes, or -1
 };
+
+template <typename TexelToTruth>
+TruthImage renderTruth(cv::Size size, const cv::Mat& state, TexelToTruth truthPoint,
+                       const std::vector<TexturedPlane>& planes, const std::vector<int>& candidates,
+                       const Eigen::Vector3d& viewpoint, const TextureEvaluationOptions& options) {
+  TruthImage truth{cv::Mat::zeros(size, CV_32FC3), cv::Mat(size, CV_32SC1, cv::Scalar(-1))};
+  const int s = std::max(1, options.supersample);
+  cv::parallel_for_(cv::Range(0, size.height), [&](const cv::Range& rows) {
+    for (int r = rows.start; r < rows.end; ++r) {
+      for (int c = 0; c < size.width; ++c) {
+        if (state.at<std::uint8_t>(r, c) != static_cast<int>(texture::TexelState::kObserved)) {
+          continue;
+        }
+        cv::Vec3f sum(0, 0, 0);
+        int plane = -2;
+        for (int i = 0; i < s && plane != -1; ++i) {
+          for (int j = 0; j < s; ++j) {
+            const Eigen::Vector3d X = truthPoint(c + (j + 0.5) / s, r + (i + 0.5) / s);
+            const int here =
+                visiblePlane(planes, candidates, X, viewpoint, options.max_plane_distance_m);
+            if (here < 0 || (plane >= 0 && here != plane)) {
+              plane = -1;
+              break;
+            }
+            plane = here;
+            const TexturedPlane& p = planes[static_cast<std::size_t>(here)];
+            sum += p.colourAt(p.plane.uvOf(X));
+          }
+        }
+        if (plane < 0) continue;
+        truth.colour.at<cv::Vec3f>(r, c) = sum / static_cast<float>(s * s);
+        truth.plane.at<int>(r, c) = plane;
+      }
+    }
+  });
+  return truth;
+}
+
+struct Comparison {
+  std::size_t texels = 0;
+  double psnr_db = 0.0;
+  int main_plane = -1;  // the true plane most compared texels lie on
+};
+
+// PSNR of `image` (CV_8UC3, or CV_32FC3 with NaN where it has no colour) against the truth
+// over the texels where both have a colour.
+Comparison compare(const cv::Mat& image, const TruthImage& truth) {
+  cv::Mat values;
+  image.convertTo(values, CV_32FC3);
+  double squared = 0.0;
+  std::map<int, std::size_t> votes;
+  Comparison result;
+  for (int r = 0; r < values.rows; ++r) {
+    for (int c = 0; c < values.cols; ++c) {
+      const int plane = truth.plane.at<int>(r, c);
+      const cv::Vec3f& got = values.at<cv::Vec3f>(r, c);
+      if (plane < 0 || std::isnan(got[0])) continue;
+      const cv::Vec3f d = got - truth.colour.at<cv::Vec3f>(r, c);
+      squared += static_cast<double>(d.dot(d));
+      ++result.texels;
+      ++votes[plane];
+    }
+  }
+  result.psnr_db = psnrOf(squared, 3 * result.texels);
+  if (!votes.empty()) {
+    result.main_plane = std::max_element(votes.begin(), votes.end(), [](const auto& a,
+                                                                        const auto& b) {
+                          return a.second < b.second;
+                        })->first;
+  }
+  return result;
+}
+
+// The shift (texels) of the truth that best lines it up with the bitmap, by phase correlation
+// of their grey levels where both have colour; zero when it exceeds max_texels.
+Eigen::Vector2d registrationShift(const cv::Mat& rgb, const TruthImage& truth,
+                                  double max_texels) {
+  cv::Mat got, want;
+  cv::cvtColor(rgb, got, cv::COLOR_RGB2GRAY);
+  got.convertTo(got, CV_32F);
+  cv::cvtColor(truth.colour, want, cv::COLOR_RGB2GRAY);
+  const cv::Mat valid = truth.plane >= 0;
+  // Each image minus its mean where valid, zero elsewhere, so the mask's edge does not
+  // dominate the correlation.
+  got.setTo(cv::mean(got, valid), ~valid);
+  want.setTo(cv::mean(want, valid), ~valid);
+  got -= cv::mean(got, valid);
+  want -= cv::mean(want, valid);
+  const cv::Point2d shift = cv::phaseCorrelate(want, got);
+  const Eigen::Vector2d d(-shift.x, -shift.y);  // the truth moved by -shift matches the bitmap
+  return d.norm() <= max_texels ? d : Eigen::Vector2d::Zero();
+}
+
+// The TSDF mesh's colour at each texel the truth covers (NaN where the mesh has none).
+template <typename TexelToRun>
+cv::Mat meshColours(const TruthImage& truth, TexelToRun runPoint,
+                    const fusion::MeshColourSampler& mesh, double max_distance) {
+  cv::Mat colours(truth.colour.size(), CV_32FC3, cv::Scalar::all(std::nan("")));
+  cv::parallel_for_(cv::Range(0, colours.rows), [&](const cv::Range& rows) {
+    for (int r = rows.start; r < rows.end; ++r) {
+      for (int c = 0; c < colours.cols; ++c) {
+        if (truth.plane.at<int>(r, c) < 0) continue;
+        if (const auto colour = mesh.colourAt(runPoint(c + 0.5, r + 0.5), max_distance)) {
+          colours.at<cv::Vec3f>(r, c) = cv::Vec3f(static_cast<float>(colour->x()),
+                                                  static_cast<float>(colour->y()),
+                                                  static_cast<float>(colour->z()));
+        }
+      }
+    }
+  });
+  return colours;
+}
 
 }  // namespace
 
@@ -133,7 +241,7 @@ TextureEvaluation evaluateTextures(const nlohmann::json& truth,
   const core::Isometry T_est_gt = T_gt_est.inverse();
 
   TextureEvaluation result;
-  std::vector<double> psnrs, baseline_psnrs;
+  std::vector<double> psnrs, registered_psnrs, baseline_psnrs;
   for (const auto& patch : patches.at("patches")) {
     if (!patch.contains("texture") || patch["texture"].is_null()) continue;
     const auto& texture = patch["texture"];
@@ -165,68 +273,39 @@ TextureEvaluation evaluateTextures(const nlohmann::json& truth,
       candidates.push_back(static_cast<int>(i));
     }
 
-    Sums sums;
-    std::mutex merge;
-    const int s = std::max(1, options.supersample);
-    cv::parallel_for_(cv::Range(0, rgb.rows), [&](const cv::Range& rows) {
-      Sums local;
-      for (int r = rows.start; r < rows.end; ++r) {
-        for (int c = 0; c < rgb.cols; ++c) {
-          if (state.at<std::uint8_t>(r, c) !=
-              static_cast<int>(texture::TexelState::kObserved)) {
-            continue;
-          }
-          // The true colour averaged over the texel, if all of it lies on one true plane.
-          cv::Vec3d truth_colour(0, 0, 0);
-          int plane = -2;
-          for (int i = 0; i < s && plane != -1; ++i) {
-            for (int j = 0; j < s; ++j) {
-              const Eigen::Vector3d X = truthPoint(c + (j + 0.5) / s, r + (i + 0.5) / s);
-              const int here =
-                  visiblePlane(planes, candidates, X, viewpoint, options.max_plane_distance_m);
-              if (here < 0 || (plane >= 0 && here != plane)) {
-                plane = -1;
-                break;
-              }
-              plane = here;
-              const TexturedPlane& p = planes[static_cast<std::size_t>(here)];
-              truth_colour += cv::Vec3d(p.colourAt(p.plane.uvOf(X)));
-            }
-          }
-          if (plane < 0) continue;
-          truth_colour /= static_cast<double>(s * s);
-          const cv::Vec3b& got = rgb.at<cv::Vec3b>(r, c);
-          for (int k = 0; k < 3; ++k) local.squared += std::pow(got[k] - truth_colour[k], 2);
-          local.texels += 1;
-          local.plane_votes[plane] += 1;
-          if (baseline != nullptr) {
-            const Eigen::Vector3d X_est = T_est_gt * truthPoint(c + 0.5, r + 0.5);
-            if (const auto mesh = baseline->colourAt(X_est, options.baseline_max_distance_m)) {
-              for (int k = 0; k < 3; ++k) {
-                local.baseline_squared += std::pow((*mesh)[k] - truth_colour[k], 2);
-              }
-              local.baseline_texels += 1;
-            }
-          }
-        }
-      }
-      const std::lock_guard<std::mutex> lock(merge);
-      sums.add(local);
-    });
-    if (sums.texels == 0) continue;
+    // The truth on the bitmap's grid, as placed, then shifted in the plane by the offset
+    // phase correlation finds between the two (the patch's placement error, which ATE and the
+    // plane figures measure; what is left is the texture's own fidelity).
+    const auto render = [&](const Eigen::Vector2d& shift) {
+      return renderTruth(rgb.size(), state, [&](double col, double row) {
+        return truthPoint(col + shift.x(), row + shift.y());
+      }, planes, candidates, viewpoint, options);
+    };
+    const TruthImage on_grid = render(Eigen::Vector2d::Zero());
+    const Comparison placed = compare(rgb, on_grid);
+    if (placed.texels == 0) continue;
     PatchTextureResult patch_result;
     patch_result.patch_id = patch.at("id").get<int>();
-    patch_result.texels = sums.texels;
-    patch_result.psnr_db = psnrOf(sums.squared, 3 * sums.texels);
-    const auto top = std::max_element(sums.plane_votes.begin(), sums.plane_votes.end(),
-                                      [](const auto& a, const auto& b) { return a.second < b.second; });
-    patch_result.plane = planes[static_cast<std::size_t>(top->first)].id;
-    if (sums.baseline_texels > 0) {
-      patch_result.baseline_psnr_db = psnrOf(sums.baseline_squared, 3 * sums.baseline_texels);
-      baseline_psnrs.push_back(*patch_result.baseline_psnr_db);
+    patch_result.texels = placed.texels;
+    patch_result.psnr_db = placed.psnr_db;
+    patch_result.plane = planes[static_cast<std::size_t>(placed.main_plane)].id;
+    const Eigen::Vector2d shift = registrationShift(rgb, on_grid, options.max_shift_m / t);
+    patch_result.shift_m = t * shift.norm();
+    patch_result.registered_psnr_db =
+        std::max(placed.psnr_db, compare(rgb, render(shift)).psnr_db);
+    if (baseline != nullptr) {
+      const cv::Mat mesh = meshColours(on_grid, [&](double col, double row) {
+        return Eigen::Vector3d(T_est_gt * truthPoint(col, row));
+      }, *baseline, options.baseline_max_distance_m);
+      const Comparison from_mesh = compare(mesh, on_grid);
+      if (from_mesh.texels > 0) {
+        patch_result.baseline_psnr_db = from_mesh.psnr_db;
+        baseline_psnrs.push_back(from_mesh.psnr_db);
+      }
     }
     psnrs.push_back(patch_result.psnr_db);
-    result.texels += sums.texels;
+    registered_psnrs.push_back(patch_result.registered_psnr_db);
+    result.texels += placed.texels;
     result.patches.push_back(patch_result);
   }
   auto mean = [](const std::vector<double>& v) {
@@ -238,6 +317,7 @@ TextureEvaluation evaluateTextures(const nlohmann::json& truth,
     result.psnr_mean_db = mean(psnrs);
     result.psnr_min_db = *std::min_element(psnrs.begin(), psnrs.end());
   }
+  if (!registered_psnrs.empty()) result.registered_psnr_mean_db = mean(registered_psnrs);
   if (!baseline_psnrs.empty()) result.baseline_psnr_mean_db = mean(baseline_psnrs);
   return result;
 }

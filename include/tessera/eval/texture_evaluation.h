@@ -22,13 +22,18 @@ struct TextureEvaluationOptions {
   double max_plane_distance_m = 0.03;  // a texel lies on a true plane at most this far away
   int supersample = 3;                 // true colour: mean of supersample^2 points per texel
   double baseline_max_distance_m = 0.04;  // mesh vertices farther than this give no colour
+  double max_shift_m = 0.03;  // registered PSNR: the largest in-plane shift looked for
 };
 
 struct PatchTextureResult {
   int patch_id = 0;
   std::string plane;          // the true plane most of its texels lie on
   std::size_t texels = 0;     // observed texels compared
-  double psnr_db = 0.0;
+  double psnr_db = 0.0;        // as placed in the map
+  // After shifting the truth in the plane onto the bitmap (phase correlation, at most
+  // max_shift_m): the texture's own fidelity, without the patch's placement error.
+  double registered_psnr_db = 0.0;
+  double shift_m = 0.0;
   std::optional<double> baseline_psnr_db;  // the same texels coloured from the TSDF mesh
 };
 
@@ -36,6 +41,7 @@ struct TextureEvaluation {
   std::vector<PatchTextureResult> patches;
   std::size_t texels = 0;
   std::optional<double> psnr_mean_db, psnr_min_db;  // over patches
+  std::optional<double> registered_psnr_mean_db;
   std::optional<double> baseline_psnr_mean_db;
 };
 
