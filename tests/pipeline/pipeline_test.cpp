@@ -2,6 +2,7 @@
 #include <sstream>
 
 #include <gtest/gtest.h>
+#include <opencv2/imgcodecs.hpp>
 #include <nlohmann/json.hpp>
 
 #include "support/synthetic_plane.h"
@@ -61,6 +62,41 @@ std::vector<nlohmann::json> readJsonLines(const fs::path& path) {
   return lines;
 }
 
+// Each finalized patch has its bitmap, referenced from patches.json and patches.obj, and the
+// bitmap shows the plane's checkerboard (levels 40 and 220, 10 cm squares).
+void expectTexturedPatches(const fs::path& out, const RunSummary& summary) {
+  ASSERT_GT(summary.patches_finalized, 0u);
+  EXPECT_EQ(summary.bitmaps, summary.patches_finalized);
+  std::ifstream patches_file(out / "patches.json");
+  const auto patches = nlohmann::json::parse(patches_file);
+  for (const auto& patch : patches["patches"]) {
+    ASSERT_FALSE(patch["texture"].is_null());
+    const cv::Mat bgra =
+        cv::imread((out / patch["texture"]["image"].get<std::string>()).string(), cv::IMREAD_UNCHANGED);
+    ASSERT_EQ(bgra.type(), CV_8UC4);
+    EXPECT_EQ(bgra.cols, patch["texture"]["width"].get<int>());
+    std::size_t opaque = 0, on_a_square = 0;
+    for (int r = 0; r < bgra.rows; ++r) {
+      for (int c = 0; c < bgra.cols; ++c) {
+        const cv::Vec4b& texel = bgra.at<cv::Vec4b>(r, c);
+        if (texel[3] == 0) continue;
+        ++opaque;
+        if (std::abs(texel[2] - 40) <= 15 || std::abs(texel[2] - 220) <= 15) ++on_a_square;
+      }
+    }
+    EXPECT_GE(opaque, patch["texture"]["observed"].get<std::size_t>());
+    // Texels straddling a square's edge average both levels.
+    EXPECT_GT(static_cast<double>(on_a_square), 0.85 * static_cast<double>(opaque));
+  }
+  std::ifstream obj(out / "patches.obj"), mtl(out / "patches.mtl");
+  const std::string obj_text((std::istreambuf_iterator<char>(obj)), std::istreambuf_iterator<char>());
+  const std::string mtl_text((std::istreambuf_iterator<char>(mtl)), std::istreambuf_iterator<char>());
+  EXPECT_NE(obj_text.find("mtllib patches.mtl"), std::string::npos);
+  EXPECT_NE(obj_text.find("usemtl patch_"), std::string::npos);
+  EXPECT_NE(obj_text.find("\nvt "), std::string::npos);
+  EXPECT_NE(mtl_text.find("map_Kd textures/patch_"), std::string::npos);
+}
+
 TEST(Pipeline, RunsEveryGoodFrameAndWritesTheOutputs) {
   const fs::path out = test::freshTempDir();
   ScriptedSource source(8, {3});
@@ -93,6 +129,7 @@ TEST(Pipeline, RunsEveryGoodFrameAndWritesTheOutputs) {
   EXPECT_EQ(lines.size() - 7, summary.patches_finalized);
   EXPECT_TRUE(fs::is_regular_file(out / "patches.obj"));
   EXPECT_TRUE(fs::is_regular_file(out / "patches.json"));
+  expectTexturedPatches(out, summary);
   lines.resize(7);
   for (std::size_t i = 0; i < lines.size(); ++i) {
     EXPECT_EQ(lines[i]["type"], "frame");
