@@ -22,7 +22,7 @@ struct BitmapConfig {
   // Each texel averages at most `neighbours` samples within radius_texels of its centre,
   // weighted by each sample's view weight times a Gaussian of its distance (sigma_texels).
   int neighbours = 8;
-  double radius_texels = 1.0;
+  double radius_texels = 1.5;
   double sigma_texels = 0.5;
   // Instead of averaging, take the colour of the one sample with the best view weight.
   bool best_view = false;
