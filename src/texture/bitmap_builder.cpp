@@ -44,7 +44,9 @@ PatchBitmap emptyBitmap(const planes::PatchSnapshot& patch, const BitmapConfig& 
   PatchBitmap bitmap;
   bitmap.id = patch.id;
   bitmap.version = patch.version;
-  bitmap.grid = principalAxisGrid(patch.outline, texelSizeFor(patch, config));
+  const double t = texelSizeFor(patch, config);
+  bitmap.grid = config.grid == "minimum_area" ? minimumAreaGrid(patch.outline, t)
+                                              : principalAxisGrid(patch.outline, t);
   bitmap.image = cv::Mat::zeros(bitmap.grid.height, bitmap.grid.width, CV_8UC3);
   bitmap.state = cv::Mat::zeros(bitmap.grid.height, bitmap.grid.width, CV_8UC1);
   return bitmap;
@@ -105,6 +107,7 @@ void readConfig(const core::ConfigSection& section, BitmapConfig& config) {
   section.read("texel_m", config.texel_m);
   section.read("min_texel_m", config.min_texel_m);
   section.read("max_texel_m", config.max_texel_m);
+  section.read("grid", config.grid);
   section.read("neighbours", config.neighbours);
   section.read("radius_texels", config.radius_texels);
   section.read("sigma_texels", config.sigma_texels);
@@ -114,6 +117,10 @@ void readConfig(const core::ConfigSection& section, BitmapConfig& config) {
     throw core::ConfigError(
         "textures: texel_m must be at least 0 (0: automatic), min_texel_m positive and "
         "max_texel_m at least min_texel_m");
+  }
+  if (config.grid != "principal_axes" && config.grid != "minimum_area") {
+    throw core::ConfigError("textures: grid must be principal_axes or minimum_area, not " +
+                            config.grid);
   }
   if (config.neighbours < 1 || config.radius_texels <= 0.0 || config.sigma_texels <= 0.0 ||
       config.max_inpaint_texels < 0) {

@@ -79,7 +79,25 @@ Eigen::Vector2d principalAxis(const std::vector<Eigen::Vector2d>& vertices) {
   return solver.eigenvectors().col(1);  // eigenvalues ascend: the largest spread
 }
 
+// The direction of the minimum-area rectangle's first side, or +u with fewer than 3 vertices.
+Eigen::Vector2d minimumAreaAxis(const std::vector<Eigen::Vector2d>& vertices) {
+  std::vector<cv::Point2f> points;
+  for (const auto& p : vertices) {
+    points.emplace_back(static_cast<float>(p.x()), static_cast<float>(p.y()));
+  }
+  if (points.size() < 3) return Eigen::Vector2d::UnitX();
+  const double angle = cv::minAreaRect(points).angle * M_PI / 180.0;
+  return {std::cos(angle), std::sin(angle)};
+}
+
 }  // namespace
+
+TexelGrid minimumAreaGrid(const planes::Outline& outline, double texel_m) {
+  const std::vector<Eigen::Vector2d> vertices = verticesOf(outline);
+  TexelGrid grid = gridAlong(vertices, minimumAreaAxis(vertices), texel_m);
+  fillMask(outline, grid);
+  return grid;
+}
 
 TexelGrid principalAxisGrid(const planes::Outline& outline, double texel_m) {
   const std::vector<Eigen::Vector2d> vertices = verticesOf(outline);
@@ -93,18 +111,7 @@ GridSizes compareGrids(const planes::Outline& outline, double texel_m) {
   GridSizes sizes;
   sizes.principal_axes = gridAlong(vertices, principalAxis(vertices), texel_m).texels();
   sizes.axis_aligned = gridAlong(vertices, Eigen::Vector2d::UnitX(), texel_m).texels();
-  std::vector<cv::Point2f> points;
-  for (const auto& p : vertices) {
-    points.emplace_back(static_cast<float>(p.x()), static_cast<float>(p.y()));
-  }
-  if (points.size() >= 3) {
-    const cv::RotatedRect box = cv::minAreaRect(points);
-    const double angle = box.angle * M_PI / 180.0;
-    sizes.minimum_area =
-        gridAlong(vertices, Eigen::Vector2d(std::cos(angle), std::sin(angle)), texel_m).texels();
-  } else {
-    sizes.minimum_area = sizes.axis_aligned;
-  }
+  sizes.minimum_area = gridAlong(vertices, minimumAreaAxis(vertices), texel_m).texels();
   return sizes;
 }
 

@@ -39,6 +39,10 @@ TEST(TexelGrid, ARotatedRectangleGetsATightGridAlongItsOwnSides) {
   // Every texel of the tight grid is inside, but for the rounded edge.
   EXPECT_GT(cv::countNonZero(grid.mask), 0.98 * 20000);
 
+  const TexelGrid minimum = minimumAreaGrid(outline, 0.01);
+  EXPECT_NEAR(static_cast<double>(minimum.texels()), 20000, 400);
+  EXPECT_GT(cv::countNonZero(minimum.mask), 0.98 * 20000);
+
   const GridSizes sizes = compareGrids(outline, 0.01);
   EXPECT_NEAR(static_cast<double>(sizes.principal_axes), 20000, 400);
   EXPECT_NEAR(static_cast<double>(sizes.minimum_area), 20000, 400);

@@ -4,6 +4,7 @@
 // them). Texels without samples stay uncoloured and masked; small holes inside the outline
 // may be inpainted from their surroundings and are marked so.
 #include <cstddef>
+#include <string>
 
 #include <opencv2/core/mat.hpp>
 
@@ -19,6 +20,9 @@ struct BitmapConfig {
   double texel_m = 0.0;
   double min_texel_m = 0.002;
   double max_texel_m = 0.02;
+  // The grid's axes: "principal_axes" of the outline's vertices (the published method) or the
+  // "minimum_area" rectangle (about 15 % fewer texels on the office's patches).
+  std::string grid = "principal_axes";
   // Each texel averages at most `neighbours` samples within radius_texels of its centre,
   // weighted by each sample's view weight times a Gaussian of its distance (sigma_texels).
   int neighbours = 8;

@@ -30,6 +30,9 @@ struct TexelGrid {
 // The grid aligned to the principal axes of the outline's vertices (outer polygons and holes).
 TexelGrid principalAxisGrid(const planes::Outline& outline, double texel_m);
 
+// The grid along the outer vertices' minimum-area rectangle (OpenCV's rotating calipers).
+TexelGrid minimumAreaGrid(const planes::Outline& outline, double texel_m);
+
 // Texel counts of the three ways to lay a rectangle over the outline, for the same texel size:
 // principal axes (what tessera uses), the patch's own (u, v) axes, and the minimum-area
 // rectangle (OpenCV's rotating calipers over the outer vertices).
