@@ -233,7 +233,13 @@ TextureEvaluation evaluateTextures(const nlohmann::json& truth,
                                    const core::Isometry& T_gt_est,
                                    const fusion::MeshColourSampler* baseline,
                                    const TextureEvaluationOptions& options) {
-  const auto textures = truthTextures(truth, truth_dir);
+  // Image textures' relative paths start at the scene file's folder, when it is still there.
+  std::filesystem::path texture_dir = truth_dir;
+  if (truth.contains("scene_dir") && truth["scene_dir"].is_string() &&
+      std::filesystem::is_directory(truth["scene_dir"].get<std::string>())) {
+    texture_dir = truth["scene_dir"].get<std::string>();
+  }
+  const auto textures = truthTextures(truth, texture_dir);
   const std::vector<TexturedPlane> planes = truthPlanes(truth, textures);
   Eigen::Vector3d viewpoint = Eigen::Vector3d::Zero();
   for (const auto& [t, pose] : truth_poses) viewpoint += pose.translation();

@@ -52,11 +52,12 @@ void runGraph(SourceStage& source, TrackingStage& tracking, IntegrationStage& in
       std::get<0>(out).try_put(std::move(fused));
     });
     // Bitmaps are independent: as many are built at once as there are free threads.
-    flow::function_node<planes::PatchSnapshot, texture::PatchBitmap> texture_node(
+    using MaybeBitmap = std::optional<texture::PatchBitmap>;
+    flow::function_node<planes::PatchSnapshot, MaybeBitmap> texture_node(
         graph, flow::unlimited,
         [&](const planes::PatchSnapshot& patch) { return textures.build(patch); });
-    flow::function_node<texture::PatchBitmap, flow::continue_msg> bitmap_store_node(
-        graph, flow::serial, [&](texture::PatchBitmap bitmap) {
+    flow::function_node<MaybeBitmap, flow::continue_msg> bitmap_store_node(
+        graph, flow::serial, [&](MaybeBitmap bitmap) {
           textures.keep(std::move(bitmap));
           return flow::continue_msg{};
         });

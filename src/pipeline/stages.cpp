@@ -204,11 +204,19 @@ std::vector<planes::PatchSnapshot> PlaneStage::snapshotsOf(
   return snapshots;
 }
 
-texture::PatchBitmap TextureStage::build(const planes::PatchSnapshot& patch) const {
-  return texture::buildBitmap(patch, config_);
+std::optional<texture::PatchBitmap> TextureStage::build(
+    const planes::PatchSnapshot& patch) const {
+  try {
+    return texture::buildBitmap(patch, config_);
+  } catch (const std::exception& e) {  // cv::Exception, bad_alloc: this patch goes untextured
+    spdlog::warn("patch {} version {}: no bitmap: {}", patch.id, patch.version, e.what());
+    return std::nullopt;
+  }
 }
 
-void TextureStage::keep(texture::PatchBitmap bitmap) {
+void TextureStage::keep(std::optional<texture::PatchBitmap> built) {
+  if (!built) return;
+  texture::PatchBitmap& bitmap = *built;
   timer_.add(bitmap.build_ms);
   area_built_m2_ += bitmap.area_m2();
   auto it = bitmaps_.find(bitmap.id);

@@ -56,6 +56,9 @@ void writeMaterials(const PatchMap& map, const TextureBindings& textures,
                     const std::filesystem::path& path) {
   std::ofstream out = openForWriting(path);
   out << "# tessera patch textures\n";
+  // Patches without a bitmap use this plain material: an OBJ's material carries over from one
+  // object to the next, so each patch names its own.
+  out << "newmtl untextured\nKa 1 1 1\nKd 0.7 0.7 0.7\nKs 0 0 0\nillum 1\n\n";
   for (const Patch& patch : map.patches()) {
     const TextureBinding* texture = patch.finalized ? textureOf(patch, textures) : nullptr;
     if (texture == nullptr) continue;
@@ -84,7 +87,8 @@ void writePatchesObj(const PatchMap& map, const std::filesystem::path& path,
     const Patch::Frame frame = patch.planeFrame();
     const TextureBinding* texture = textureOf(patch, textures);
     out << fmt::format("o patch_{}_v{}\n", patch.id, patch.version);
-    if (texture != nullptr) out << fmt::format("usemtl patch_{}\n", patch.id);
+    out << (texture != nullptr ? fmt::format("usemtl patch_{}\n", patch.id)
+                               : std::string("usemtl untextured\n"));
     // Every vertex gets a texture coordinate (0, 0 on untextured patches), so that vertex and
     // texture-coordinate indices stay equal through the file.
     auto vertex = [&](double u, double v) {

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <numeric>
 #include <vector>
 
@@ -18,18 +19,26 @@ namespace {
 
 using planes::ColourSample;
 
+constexpr std::size_t kMaxTexels = 64'000'000;  // 192 MB of RGB
+
 // The colour of one texel from its neighbouring samples (indices into `samples`, with squared
 // distances to the texel centre): the view weights exp(score) relative to the best of them,
 // times a Gaussian of the distance; or the single heaviest sample in best-view mode.
 cv::Vec3b texelColour(const std::vector<ColourSample>& samples, const std::vector<int>& indices,
                       const std::vector<double>& distance2, double two_sigma2, bool best_view) {
-  float best_score = ColourSample::kEmpty;
-  for (int i : indices) best_score = std::max(best_score, samples[i].score);
+  // Log weights: view score plus the Gaussian's exponent; relative to the largest, so the
+  // heaviest sample weighs 1 and the sum cannot underflow to zero.
+  double best_log = -std::numeric_limits<double>::infinity();
+  for (std::size_t j = 0; j < indices.size(); ++j) {
+    best_log = std::max(best_log, static_cast<double>(samples[indices[j]].score) -
+                                      distance2[j] / two_sigma2);
+  }
   double sum[3] = {0.0, 0.0, 0.0}, total = 0.0, heaviest = -1.0;
   cv::Vec3b best;
   for (std::size_t j = 0; j < indices.size(); ++j) {
     const ColourSample& s = samples[indices[j]];
-    const double w = std::exp(static_cast<double>(s.score - best_score) - distance2[j] / two_sigma2);
+    const double w =
+        std::exp(static_cast<double>(s.score) - distance2[j] / two_sigma2 - best_log);
     if (w > heaviest) heaviest = w, best = cv::Vec3b(s.rgb[0], s.rgb[1], s.rgb[2]);
     for (int c = 0; c < 3; ++c) sum[c] += w * s.rgb[c];
     total += w;
@@ -44,7 +53,15 @@ PatchBitmap emptyBitmap(const planes::PatchSnapshot& patch, const BitmapConfig& 
   PatchBitmap bitmap;
   bitmap.id = patch.id;
   bitmap.version = patch.version;
-  const double t = texelSizeFor(patch, config);
+  double t = texelSizeFor(patch, config);
+  // A grid beyond kMaxTexels (a huge patch at a fine texel) gets coarser texels instead; the
+  // sizes come from the outline's vertices alone, before any image is allocated.
+  const GridSizes sizes = compareGrids(patch.outline, t);
+  const std::size_t texels =
+      config.grid == "minimum_area" ? sizes.minimum_area : sizes.principal_axes;
+  if (texels > kMaxTexels) {
+    t *= 1.01 * std::sqrt(static_cast<double>(texels) / static_cast<double>(kMaxTexels));
+  }
   bitmap.grid = config.grid == "minimum_area" ? minimumAreaGrid(patch.outline, t)
                                               : principalAxisGrid(patch.outline, t);
   bitmap.image = cv::Mat::zeros(bitmap.grid.height, bitmap.grid.width, CV_8UC3);
@@ -96,7 +113,8 @@ void inpaintSmallHoles(PatchBitmap& bitmap, int max_texels) {
   }
   const int filled = cv::countNonZero(fill);
   if (filled == 0) return;
-  cv::inpaint(bitmap.image, fill, bitmap.image, 2.0, cv::INPAINT_TELEA);
+  // Radius 1: only the observed ring around each hole is known to be good colour.
+  cv::inpaint(bitmap.image, fill, bitmap.image, 1.0, cv::INPAINT_TELEA);
   bitmap.state.setTo(static_cast<int>(TexelState::kInpainted), fill);
   bitmap.inpainted = static_cast<std::size_t>(filled);
 }
@@ -113,10 +131,12 @@ void readConfig(const core::ConfigSection& section, BitmapConfig& config) {
   section.read("sigma_texels", config.sigma_texels);
   section.read("best_view", config.best_view);
   section.read("max_inpaint_texels", config.max_inpaint_texels);
-  if (config.texel_m < 0.0 || config.min_texel_m <= 0.0 || config.max_texel_m < config.min_texel_m) {
+  constexpr double kFinest = 0.0005;  // half a millimetre: finer than any depth camera sees
+  if ((config.texel_m != 0.0 && config.texel_m < kFinest) || config.min_texel_m < kFinest ||
+      config.max_texel_m < config.min_texel_m) {
     throw core::ConfigError(
-        "textures: texel_m must be at least 0 (0: automatic), min_texel_m positive and "
-        "max_texel_m at least min_texel_m");
+        "textures: texel_m must be 0 (automatic) or at least 0.0005, min_texel_m at least "
+        "0.0005 and max_texel_m at least min_texel_m");
   }
   if (config.grid != "principal_axes" && config.grid != "minimum_area") {
     throw core::ConfigError("textures: grid must be principal_axes or minimum_area, not " +

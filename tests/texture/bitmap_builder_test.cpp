@@ -4,6 +4,7 @@
 
 #include <opencv2/imgproc.hpp>
 
+#include "tessera/core/error.h"
 #include "tessera/planes/frame_sharpness.h"
 #include "tessera/texture/bitmap_builder.h"
 
@@ -171,6 +172,27 @@ TEST(SharpnessGauge, AMotionBlurredFrameCountsForLess) {
   EXPECT_LT(factor, 0.5);
   EXPECT_GE(factor, planes::SharpnessGauge::kFloor);
   EXPECT_DOUBLE_EQ(gauge.measure(sharp), 1.0);
+}
+
+}  // namespace
+}  // namespace tessera::texture
+
+namespace tessera::texture {
+namespace {
+
+TEST(BitmapConfig, OutOfRangeValuesAreRejected) {
+  for (const char* yaml : {"texel_m: 0.0001", "min_texel_m: 0", "max_texel_m: 0.001",
+                           "neighbours: 0", "sigma_texels: 0", "grid: diagonal"}) {
+    const core::ConfigDocument doc = core::ConfigDocument::fromString(yaml, "test.yaml");
+    BitmapConfig config;
+    EXPECT_THROW(readConfig(doc.root(), config), core::ConfigError) << yaml;
+  }
+  const core::ConfigDocument doc =
+      core::ConfigDocument::fromString("texel_m: 0.004\ngrid: minimum_area", "test.yaml");
+  BitmapConfig config;
+  readConfig(doc.root(), config);
+  EXPECT_EQ(config.texel_m, 0.004);
+  EXPECT_EQ(config.grid, "minimum_area");
 }
 
 }  // namespace

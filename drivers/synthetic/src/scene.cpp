@@ -198,6 +198,7 @@ Scene loadScene(const std::filesystem::path& path) {
   const core::ConfigDocument doc = core::ConfigDocument::load(path);
   const core::ConfigSection root = doc.root();
   Scene scene;
+  scene.directory = std::filesystem::absolute(path).parent_path();
   root.read("name", scene.name);
   int seed = 1;
   root.read("seed", seed);

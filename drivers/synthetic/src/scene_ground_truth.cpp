@@ -65,6 +65,7 @@ nlohmann::json sceneGroundTruth(const Scene& scene) {
 
   const SensorProfile& sensor = scene.sensor;
   return {{"scene", scene.name},
+          {"scene_dir", scene.directory.string()},
           {"seed", scene.seed},
           {"sensor",
            {{"profile", sensor.name},

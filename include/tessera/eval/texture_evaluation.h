@@ -45,8 +45,8 @@ struct TextureEvaluation {
   std::optional<double> baseline_psnr_mean_db;
 };
 
-// `truth`: a parsed .gt.json with planes and textures (whose definitions are resolved against
-// truth_dir); `truth_poses` its camera poses (their mean position says which side of a plane
+// `truth`: a parsed .gt.json with planes and textures (image paths in their definitions are
+// resolved against its scene_dir, else truth_dir); `truth_poses` its camera poses (their mean position says which side of a plane
 // the room is); `patches`: a parsed patches.json whose texture images are under run_dir;
 // T_gt_est maps the run's world frame onto the truth's. `baseline`, when given, colours the
 // same texels from the TSDF mesh. Texels whose area spans two true surfaces, or none, are left

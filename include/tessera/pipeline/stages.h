@@ -171,8 +171,10 @@ class TextureStage {
  public:
   explicit TextureStage(const texture::BitmapConfig& config) : config_(config) {}
 
-  texture::PatchBitmap build(const planes::PatchSnapshot& patch) const;
-  void keep(texture::PatchBitmap bitmap);
+  // Nothing (with a warning naming the patch) when the bitmap cannot be built, so that one bad
+  // patch costs its bitmap only, never the run.
+  std::optional<texture::PatchBitmap> build(const planes::PatchSnapshot& patch) const;
+  void keep(std::optional<texture::PatchBitmap> bitmap);
 
   // The newest bitmap of each patch id.
   const std::map<int, texture::PatchBitmap>& bitmaps() const { return bitmaps_; }

@@ -62,6 +62,7 @@ struct Scene {
   SensorProfile sensor;
   std::map<std::string, std::unique_ptr<Texture>> textures;
   std::map<std::string, std::string> texture_definitions;  // each texture's scene entry, YAML
+  std::filesystem::path directory;  // the scene file's folder (absolute): image paths start here
   std::vector<ScenePlane> planes;
   std::vector<SceneSphere> spheres;
   std::vector<SceneCylinder> cylinders;
