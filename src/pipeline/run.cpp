@@ -54,7 +54,8 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
   alignment.enabled = alignment.enabled && options.poses == PoseSource::kTrack;
   PlaneStage plane_stage(config.planes, config.patches, alignment);
   TextureStage texture_stage(config.textures);
-  StatsSink sink(options.out_dir, total, options.on_progress);
+  StatsSink sink(options.out_dir, total, options.on_progress,
+                 [&texture_stage] { return texture_stage.bitmapBytes(); });
 
   const auto start = std::chrono::steady_clock::now();
   runGraph(source_stage, tracking_stage, integration_stage, plane_stage, texture_stage, sink,

@@ -219,23 +219,28 @@ void TextureStage::keep(std::optional<texture::PatchBitmap> built) {
   texture::PatchBitmap& bitmap = *built;
   timer_.add(bitmap.build_ms);
   area_built_m2_ += bitmap.area_m2();
+  const auto bytesOf = [](const texture::PatchBitmap& b) { return 3 * b.grid.texels(); };
   auto it = bitmaps_.find(bitmap.id);
   // Versions of one patch may be built out of order; the newest wins.
   if (it == bitmaps_.end()) {
+    bitmap_bytes_ += bytesOf(bitmap);
     bitmaps_.emplace(bitmap.id, std::move(bitmap));
   } else if (it->second.version < bitmap.version) {
+    bitmap_bytes_ += bytesOf(bitmap);
+    bitmap_bytes_ -= bytesOf(it->second);
     it->second = std::move(bitmap);
   }
 }
 
 StatsSink::StatsSink(const std::filesystem::path& out_dir, std::optional<std::size_t> frames_total,
-                     ProgressCallback on_progress)
+                     ProgressCallback on_progress, std::function<std::size_t()> bitmap_bytes)
     : stats_path_(out_dir / "stats.jsonl"),
       trajectory_path_(out_dir / "trajectory.txt"),
       stats_(stats_path_),
       trajectory_(trajectory_path_),
       frames_total_(frames_total),
       on_progress_(std::move(on_progress)),
+      bitmap_bytes_(std::move(bitmap_bytes)),
       start_(std::chrono::steady_clock::now()) {
   for (const auto& [file, path] :
        {std::pair{&stats_, &stats_path_}, {&trajectory_, &trajectory_path_}}) {
@@ -253,7 +258,8 @@ void StatsSink::process(const FusedFrame& fused) {
       fused.T_W_C_planes ? fused.T_W_C_planes : fused.T_W_C;
   if (pose) estimate_[fused.frame.timestamp_ns] = *pose;
   if (fused.frame.T_W_C_gt) ground_truth_[fused.frame.timestamp_ns] = *fused.frame.T_W_C_gt;
-  map_bytes_ = fused.tsdf_bytes;  // textures join the map size in later stages
+  const std::size_t bitmap_bytes = bitmap_bytes_ ? bitmap_bytes_() : 0;
+  map_bytes_ = fused.tsdf_bytes + bitmap_bytes;
   const double elapsed_s =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
 
@@ -267,6 +273,7 @@ void StatsSink::process(const FusedFrame& fused) {
                            {"integration_ms", fused.integration_ms},
                            {"tsdf_bytes", fused.tsdf_bytes},
                            {"tsdf_blocks_released", fused.tsdf_blocks_released},
+                           {"bitmap_bytes", bitmap_bytes},
                            {"map_bytes", map_bytes_},
                            {"planes_ms", fused.planes_ms},
                            {"planes_detected", fused.planes_detected},

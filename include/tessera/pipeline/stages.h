@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <fstream>
+#include <atomic>
 #include <functional>
 #include <map>
 #include <optional>
@@ -181,10 +182,13 @@ class TextureStage {
   // Build time of each bitmap, and their total area (m^2 of observed texels).
   const StageTimer& timer() const { return timer_; }
   double areaBuiltM2() const { return area_built_m2_; }
+  // Bytes of the bitmaps kept (3 per texel of their grids); safe to read from any thread.
+  std::size_t bitmapBytes() const { return bitmap_bytes_.load(); }
 
  private:
   texture::BitmapConfig config_;
   std::map<int, texture::PatchBitmap> bitmaps_;
+  std::atomic<std::size_t> bitmap_bytes_{0};
   StageTimer timer_;
   double area_built_m2_ = 0.0;
 };
@@ -204,9 +208,10 @@ class StatsSink {
   using ProgressCallback = std::function<void(const Progress&)>;
 
   // Creates OUT/stats.jsonl and OUT/trajectory.txt; throws core::Error naming a file that
-  // cannot be created.
+  // cannot be created. `bitmap_bytes`, when given, says how much the patch bitmaps hold now:
+  // they count towards the map's size.
   StatsSink(const std::filesystem::path& out_dir, std::optional<std::size_t> frames_total,
-            ProgressCallback on_progress);
+            ProgressCallback on_progress, std::function<std::size_t()> bitmap_bytes = {});
 
   void process(const FusedFrame& fused);
   // One stats.jsonl line per patch event: {"type":"patch","event":"finalized"|"retired",...}.
@@ -228,6 +233,7 @@ class StatsSink {
   std::ofstream trajectory_;
   std::optional<std::size_t> frames_total_;
   ProgressCallback on_progress_;
+  std::function<std::size_t()> bitmap_bytes_;
   std::chrono::steady_clock::time_point start_;
   std::size_t frames_done_ = 0;
   std::size_t map_bytes_ = 0;
