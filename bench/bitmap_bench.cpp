@@ -13,8 +13,8 @@
 #include <fstream>
 
 #include <fmt/format.h>
-#include <nlohmann/json.hpp>
 #include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
 #include <opencv2/core/utility.hpp>
 
 #include "tessera/texture/bitmap_builder.h"
@@ -75,11 +75,12 @@ void compareGridsOfRun(const std::string& run_dir, double texel_m) {
                sizes.axis_aligned, sizes.minimum_area);
     principal += sizes.principal_axes, aligned += sizes.axis_aligned, minimum += sizes.minimum_area;
   }
-  fmt::print("  all {:>10} {:>10} {:>10}   principal axes save {:.1f} % on axis-aligned, "
-             "{:.1f} % on minimum-area\n",
-             principal, aligned, minimum,
-             100.0 * (1.0 - static_cast<double>(principal) / static_cast<double>(aligned)),
-             100.0 * (1.0 - static_cast<double>(principal) / static_cast<double>(minimum)));
+  fmt::print(
+      "  all {:>10} {:>10} {:>10}   principal axes save {:.1f} % on axis-aligned, "
+      "{:.1f} % on minimum-area\n",
+      principal, aligned, minimum,
+      100.0 * (1.0 - static_cast<double>(principal) / static_cast<double>(aligned)),
+      100.0 * (1.0 - static_cast<double>(principal) / static_cast<double>(minimum)));
 }
 
 }  // namespace

@@ -128,9 +128,9 @@ CLI::App* addSynthCommand(CLI::App& app, RecordArguments& args) {
   synth->add_option("OUT", args.output, "The .oni file to write (ground truth: OUT.gt.json)")
       ->required();
   addCodecOptions(synth, args);
-  synth->add_option("--sensor", args.sensor,
-                    "Sensor profile instead of the scene's: " +
-                        drivers::synthetic::SensorProfile::knownNames());
+  synth->add_option(
+      "--sensor", args.sensor,
+      "Sensor profile instead of the scene's: " + drivers::synthetic::SensorProfile::knownNames());
   synth
       ->add_option("--max-frames", args.source_args.max_frames,
                    "Render only this many frames (0: all)")

@@ -11,8 +11,8 @@
 #include "tessera/core/error.h"
 #include "tessera/eval/plane_evaluation.h"
 #include "tessera/eval/texture_evaluation.h"
-#include "tessera/fusion/mesh_colours.h"
 #include "tessera/eval/trajectory.h"
+#include "tessera/fusion/mesh_colours.h"
 
 namespace tessera::eval {
 
@@ -143,12 +143,11 @@ nlohmann::json evaluateRun(const std::filesystem::path& run_dir,
     const auto baseline = meshBaseline(run_dir);
     try {
       addTextureFigures(evaluateTextures(gt, ground_truth.parent_path(), truth_poses,
-                                         readJson(patches_path), run_dir, T_gt_est,
-                                         baseline.get()),
+                                         readJson(patches_path), run_dir, T_gt_est, baseline.get()),
                         figures);
     } catch (const core::Error& e) {
-      throw core::Error(fmt::format("{} against {}: {}", patches_path.string(),
-                                    ground_truth.string(), e.what()));
+      throw core::Error(
+          fmt::format("{} against {}: {}", patches_path.string(), ground_truth.string(), e.what()));
     }
   }
   // Figures of stages that do not exist yet stay null (docs/METRICS.md).

@@ -5,8 +5,8 @@
 #include <map>
 #include <memory>
 
-#include <Eigen/Geometry>
 #include <fmt/format.h>
+#include <Eigen/Geometry>
 #include <opencv2/core.hpp>
 #include <opencv2/core/utility.hpp>
 #include <opencv2/imgproc.hpp>
@@ -59,8 +59,7 @@ std::map<std::string, std::unique_ptr<Texture>> truthTextures(
 }
 
 std::vector<TexturedPlane> truthPlanes(
-    const nlohmann::json& truth,
-    const std::map<std::string, std::unique_ptr<Texture>>& textures) {
+    const nlohmann::json& truth, const std::map<std::string, std::unique_ptr<Texture>>& textures) {
   std::vector<TexturedPlane> planes;
   for (const auto& p : truth.at("planes")) {
     TexturedPlane plane;
@@ -176,18 +175,17 @@ Comparison compare(const cv::Mat& image, const TruthImage& truth) {
   }
   result.psnr_db = psnrOf(squared, 3 * result.texels);
   if (!votes.empty()) {
-    result.main_plane = std::max_element(votes.begin(), votes.end(), [](const auto& a,
-                                                                        const auto& b) {
-                          return a.second < b.second;
-                        })->first;
+    result.main_plane =
+        std::max_element(votes.begin(), votes.end(), [](const auto& a, const auto& b) {
+          return a.second < b.second;
+        })->first;
   }
   return result;
 }
 
 // The shift (texels) of the truth that best lines it up with the bitmap, by phase correlation
 // of their grey levels where both have colour; zero when it exceeds max_texels.
-Eigen::Vector2d registrationShift(const cv::Mat& rgb, const TruthImage& truth,
-                                  double max_texels) {
+Eigen::Vector2d registrationShift(const cv::Mat& rgb, const TruthImage& truth, double max_texels) {
   cv::Mat got, want;
   cv::cvtColor(rgb, got, cv::COLOR_RGB2GRAY);
   got.convertTo(got, CV_32F);
@@ -214,9 +212,9 @@ cv::Mat meshColours(const TruthImage& truth, TexelToRun runPoint,
       for (int c = 0; c < colours.cols; ++c) {
         if (truth.plane.at<int>(r, c) < 0) continue;
         if (const auto colour = mesh.colourAt(runPoint(c + 0.5, r + 0.5), max_distance)) {
-          colours.at<cv::Vec3f>(r, c) = cv::Vec3f(static_cast<float>(colour->x()),
-                                                  static_cast<float>(colour->y()),
-                                                  static_cast<float>(colour->z()));
+          colours.at<cv::Vec3f>(r, c) =
+              cv::Vec3f(static_cast<float>(colour->x()), static_cast<float>(colour->y()),
+                        static_cast<float>(colour->z()));
         }
       }
     }
@@ -266,7 +264,8 @@ TextureEvaluation evaluateTextures(const nlohmann::json& truth,
     // In the truth's frame: texel (col, row) at fraction (a, b) of its side.
     auto truthPoint = [&](double col, double row) {
       const Eigen::Vector2d uv = grid_origin + t * (col * x_axis + row * y_axis);
-      return Eigen::Vector3d(T_gt_est * Eigen::Vector3d(origin + uv.x() * u_axis + uv.y() * v_axis));
+      return Eigen::Vector3d(T_gt_est *
+                             Eigen::Vector3d(origin + uv.x() * u_axis + uv.y() * v_axis));
     };
     // Candidate planes: those near the patch's centre plane at all (cheap filter per patch).
     const Eigen::Vector3d centre = truthPoint(rgb.cols / 2.0, rgb.rows / 2.0);
@@ -283,9 +282,10 @@ TextureEvaluation evaluateTextures(const nlohmann::json& truth,
     // phase correlation finds between the two (the patch's placement error, which ATE and the
     // plane figures measure; what is left is the texture's own fidelity).
     const auto render = [&](const Eigen::Vector2d& shift) {
-      return renderTruth(rgb.size(), state, [&](double col, double row) {
-        return truthPoint(col + shift.x(), row + shift.y());
-      }, planes, candidates, viewpoint, options);
+      return renderTruth(
+          rgb.size(), state,
+          [&](double col, double row) { return truthPoint(col + shift.x(), row + shift.y()); },
+          planes, candidates, viewpoint, options);
     };
     const TruthImage on_grid = render(Eigen::Vector2d::Zero());
     const Comparison placed = compare(rgb, on_grid);
@@ -297,12 +297,12 @@ TextureEvaluation evaluateTextures(const nlohmann::json& truth,
     patch_result.plane = planes[static_cast<std::size_t>(placed.main_plane)].id;
     const Eigen::Vector2d shift = registrationShift(rgb, on_grid, options.max_shift_m / t);
     patch_result.shift_m = t * shift.norm();
-    patch_result.registered_psnr_db =
-        std::max(placed.psnr_db, compare(rgb, render(shift)).psnr_db);
+    patch_result.registered_psnr_db = std::max(placed.psnr_db, compare(rgb, render(shift)).psnr_db);
     if (baseline != nullptr) {
-      const cv::Mat mesh = meshColours(on_grid, [&](double col, double row) {
-        return Eigen::Vector3d(T_est_gt * truthPoint(col, row));
-      }, *baseline, options.baseline_max_distance_m);
+      const cv::Mat mesh = meshColours(
+          on_grid,
+          [&](double col, double row) { return Eigen::Vector3d(T_est_gt * truthPoint(col, row)); },
+          *baseline, options.baseline_max_distance_m);
       const Comparison from_mesh = compare(mesh, on_grid);
       if (from_mesh.texels > 0) {
         patch_result.baseline_psnr_db = from_mesh.psnr_db;

@@ -43,14 +43,15 @@ void runGraph(SourceStage& source, TrackingStage& tracking, IntegrationStage& in
     // The plane stage sends the frame on to the sink and each patch it finalized to texturing.
     using PlanesNode =
         flow::multifunction_node<FusedFrame, std::tuple<FusedFrame, planes::PatchSnapshot>>;
-    PlanesNode planes_node(graph, flow::serial, [&](FusedFrame fused, PlanesNode::output_ports_type& out) {
-      fused = planes.process(std::move(fused));
-      for (planes::PatchSnapshot& patch : fused.finalized_patches) {
-        std::get<1>(out).try_put(std::move(patch));
-      }
-      fused.finalized_patches.clear();
-      std::get<0>(out).try_put(std::move(fused));
-    });
+    PlanesNode planes_node(graph, flow::serial,
+                           [&](FusedFrame fused, PlanesNode::output_ports_type& out) {
+                             fused = planes.process(std::move(fused));
+                             for (planes::PatchSnapshot& patch : fused.finalized_patches) {
+                               std::get<1>(out).try_put(std::move(patch));
+                             }
+                             fused.finalized_patches.clear();
+                             std::get<0>(out).try_put(std::move(fused));
+                           });
     // Bitmaps are independent: as many are built at once as there are free threads.
     using MaybeBitmap = std::optional<texture::PatchBitmap>;
     flow::function_node<planes::PatchSnapshot, MaybeBitmap> texture_node(

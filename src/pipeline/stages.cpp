@@ -186,8 +186,7 @@ FusedFrame PlaneStage::process(FusedFrame fused) {
   return fused;
 }
 
-std::vector<planes::PatchEvent> PlaneStage::finish(
-    std::vector<planes::PatchSnapshot>& finalized) {
+std::vector<planes::PatchEvent> PlaneStage::finish(std::vector<planes::PatchSnapshot>& finalized) {
   std::vector<planes::PatchEvent> events = map_.finalizeAll();
   count(events);
   finalized = snapshotsOf(events);
@@ -199,13 +198,13 @@ std::vector<planes::PatchSnapshot> PlaneStage::snapshotsOf(
   std::vector<planes::PatchSnapshot> snapshots;
   for (const planes::PatchEvent& event : events) {
     if (event.kind != planes::PatchEvent::Kind::kFinalized) continue;
-    if (const planes::Patch* patch = map_.find(event.id)) snapshots.push_back(map_.snapshot(*patch));
+    if (const planes::Patch* patch = map_.find(event.id))
+      snapshots.push_back(map_.snapshot(*patch));
   }
   return snapshots;
 }
 
-std::optional<texture::PatchBitmap> TextureStage::build(
-    const planes::PatchSnapshot& patch) const {
+std::optional<texture::PatchBitmap> TextureStage::build(const planes::PatchSnapshot& patch) const {
   try {
     return texture::buildBitmap(patch, config_);
   } catch (const std::exception& e) {  // cv::Exception, bad_alloc: this patch goes untextured

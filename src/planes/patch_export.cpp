@@ -62,9 +62,10 @@ void writeMaterials(const PatchMap& map, const TextureBindings& textures,
   for (const Patch& patch : map.patches()) {
     const TextureBinding* texture = patch.finalized ? textureOf(patch, textures) : nullptr;
     if (texture == nullptr) continue;
-    out << fmt::format("newmtl patch_{}\nKa 1 1 1\nKd 1 1 1\nKs 0 0 0\nillum 1\nmap_Kd {}\n"
-                       "map_d {}\n\n",
-                       patch.id, texture->image, texture->image);
+    out << fmt::format(
+        "newmtl patch_{}\nKa 1 1 1\nKd 1 1 1\nKs 0 0 0\nillum 1\nmap_Kd {}\n"
+        "map_d {}\n\n",
+        patch.id, texture->image, texture->image);
   }
   checkWritten(out, path);
 }
@@ -95,8 +96,8 @@ void writePatchesObj(const PatchMap& map, const std::filesystem::path& path,
       const Eigen::Vector3d X = toWorld(frame, u, v);
       const Eigen::Vector2d st =
           texture != nullptr ? textureCoordinates(*texture, u, v) : Eigen::Vector2d::Zero();
-      out << fmt::format("v {:.4f} {:.4f} {:.4f}\nvt {:.5f} {:.5f}\n", X.x(), X.y(), X.z(),
-                         st.x(), st.y());
+      out << fmt::format("v {:.4f} {:.4f} {:.4f}\nvt {:.5f} {:.5f}\n", X.x(), X.y(), X.z(), st.x(),
+                         st.y());
       return ++vertices;
     };
     for (int r = 0; r < outline.grid.rows; ++r) {

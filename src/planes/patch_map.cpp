@@ -227,8 +227,7 @@ void PatchMap::addColours(const core::Frame& frame, const PlaneDetection& detect
       sample.u = offset.dot(target.u_C);
       sample.v = offset.dot(target.v_C);
       sample.rgb = {rgb[x][0], rgb[x][1], rgb[x][2]};
-      sample.score =
-          std::log(std::abs(along) / ray_norm / (distance * distance)) + frame_score;
+      sample.score = std::log(std::abs(along) / ray_norm / (distance * distance)) + frame_score;
       target.samples->add(sample);
       target.patch->footprint_sum_m += distance * inverse_fx;
       target.patch->footprint_pixels += 1;

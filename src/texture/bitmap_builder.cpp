@@ -30,15 +30,14 @@ cv::Vec3b texelColour(const std::vector<ColourSample>& samples, const std::vecto
   // heaviest sample weighs 1 and the sum cannot underflow to zero.
   double best_log = -std::numeric_limits<double>::infinity();
   for (std::size_t j = 0; j < indices.size(); ++j) {
-    best_log = std::max(best_log, static_cast<double>(samples[indices[j]].score) -
-                                      distance2[j] / two_sigma2);
+    best_log = std::max(best_log,
+                        static_cast<double>(samples[indices[j]].score) - distance2[j] / two_sigma2);
   }
   double sum[3] = {0.0, 0.0, 0.0}, total = 0.0, heaviest = -1.0;
   cv::Vec3b best;
   for (std::size_t j = 0; j < indices.size(); ++j) {
     const ColourSample& s = samples[indices[j]];
-    const double w =
-        std::exp(static_cast<double>(s.score) - distance2[j] / two_sigma2 - best_log);
+    const double w = std::exp(static_cast<double>(s.score) - distance2[j] / two_sigma2 - best_log);
     if (w > heaviest) heaviest = w, best = cv::Vec3b(s.rgb[0], s.rgb[1], s.rgb[2]);
     for (int c = 0; c < 3; ++c) sum[c] += w * s.rgb[c];
     total += w;
@@ -98,10 +97,9 @@ void inpaintSmallHoles(PatchBitmap& bitmap, int max_texels) {
   const cv::Mat cross = cv::getStructuringElement(cv::MORPH_CROSS, cv::Size(3, 3));
   for (int label = 1; label < count; ++label) {
     if (stats.at<int>(label, cv::CC_STAT_AREA) > max_texels) continue;
-    const cv::Rect box(stats.at<int>(label, cv::CC_STAT_LEFT) - 1,
-                       stats.at<int>(label, cv::CC_STAT_TOP) - 1,
-                       stats.at<int>(label, cv::CC_STAT_WIDTH) + 2,
-                       stats.at<int>(label, cv::CC_STAT_HEIGHT) + 2);
+    const cv::Rect box(
+        stats.at<int>(label, cv::CC_STAT_LEFT) - 1, stats.at<int>(label, cv::CC_STAT_TOP) - 1,
+        stats.at<int>(label, cv::CC_STAT_WIDTH) + 2, stats.at<int>(label, cv::CC_STAT_HEIGHT) + 2);
     const cv::Rect inside = box & cv::Rect(0, 0, holes.cols, holes.rows);
     if (inside != box) continue;  // touches the bitmap's border
     const cv::Mat component = labels(box) == label;
@@ -186,8 +184,7 @@ PatchBitmap buildBitmap(const planes::PatchSnapshot& patch, const BitmapConfig& 
   return bitmap;
 }
 
-PatchBitmap buildBitmapBruteForce(const planes::PatchSnapshot& patch,
-                                  const BitmapConfig& config) {
+PatchBitmap buildBitmapBruteForce(const planes::PatchSnapshot& patch, const BitmapConfig& config) {
   PatchBitmap bitmap = emptyBitmap(patch, config);
   const std::vector<ColourSample>& samples = patch.samples;
   const double t = bitmap.grid.texel_m;
@@ -209,7 +206,8 @@ PatchBitmap buildBitmapBruteForce(const planes::PatchSnapshot& patch,
       distance2.push_back(all[i]);
     }
     if (indices.empty()) return;
-    setObserved(bitmap, r, c, texelColour(samples, indices, distance2, two_sigma2, config.best_view));
+    setObserved(bitmap, r, c,
+                texelColour(samples, indices, distance2, two_sigma2, config.best_view));
   });
   return bitmap;
 }

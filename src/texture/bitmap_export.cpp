@@ -17,7 +17,8 @@ void writePng(const std::filesystem::path& path, const cv::Mat& image) {
   } catch (const cv::Exception& e) {
     throw core::Error(fmt::format("{}: could not be written: {}", path.string(), e.what()));
   }
-  if (!written) throw core::Error(fmt::format("{}: could not be written (disk full?)", path.string()));
+  if (!written)
+    throw core::Error(fmt::format("{}: could not be written (disk full?)", path.string()));
 }
 
 }  // namespace
@@ -45,7 +46,8 @@ planes::TextureBindings writeBitmaps(const std::map<int, PatchBitmap>& bitmaps,
   const std::filesystem::path folder = out_dir / "textures";
   std::error_code ec;
   std::filesystem::create_directories(folder, ec);
-  if (ec) throw core::Error(fmt::format("{}: cannot be created: {}", folder.string(), ec.message()));
+  if (ec)
+    throw core::Error(fmt::format("{}: cannot be created: {}", folder.string(), ec.message()));
   planes::TextureBindings bindings;
   for (const auto& [id, bitmap] : bitmaps) {
     const planes::Patch* patch = map.find(id);

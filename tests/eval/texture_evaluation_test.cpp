@@ -43,8 +43,8 @@ json writeRun(const fs::path& run_dir, const Eigen::Vector2d& error) {
   cv::Mat bgra(n, n, CV_8UC4), state(n, n, CV_8UC1, cv::Scalar(255));
   for (int r = 0; r < n; ++r) {
     for (int c = 0; c < n; ++c) {
-      const cv::Vec3f rgb = texture->colour(0.5 + (c + 0.5) * t + error.x(),
-                                            0.5 + (r + 0.5) * t + error.y());
+      const cv::Vec3f rgb =
+          texture->colour(0.5 + (c + 0.5) * t + error.x(), 0.5 + (r + 0.5) * t + error.y());
       bgra.at<cv::Vec4b>(r, c) = cv::Vec4b(cv::saturate_cast<std::uint8_t>(rgb[2]),
                                            cv::saturate_cast<std::uint8_t>(rgb[1]),
                                            cv::saturate_cast<std::uint8_t>(rgb[0]), 255);
@@ -80,9 +80,9 @@ const Trajectory kAbove = {{0, core::Isometry(Eigen::Translation3d(1.0, 1.0, 1.5
 TEST(TextureEvaluation, AFaithfulBitmapScoresHighAndTheTsdfBaselineIsOptional) {
   const fs::path run = test::freshTempDir();
   const json patches = writeRun(run, Eigen::Vector2d::Zero());
-  const TextureEvaluation result = evaluateTextures(
-      truthScene(), ".", kAbove, patches, run, core::Isometry::Identity(), nullptr,
-      centreSampling());
+  const TextureEvaluation result =
+      evaluateTextures(truthScene(), ".", kAbove, patches, run, core::Isometry::Identity(), nullptr,
+                       centreSampling());
   ASSERT_EQ(result.patches.size(), 1u);
   EXPECT_EQ(result.patches[0].plane, "floor");
   EXPECT_EQ(result.patches[0].texels, 200u * 200u);
@@ -94,9 +94,9 @@ TEST(TextureEvaluation, APlacementErrorCostsPsnrThatRegistrationGivesBack) {
   const fs::path run = test::freshTempDir();
   // The bitmap shows the floor 1 cm along u and 5 mm along v from where it lies.
   const json patches = writeRun(run, Eigen::Vector2d(0.01, 0.005));
-  const TextureEvaluation result = evaluateTextures(
-      truthScene(), ".", kAbove, patches, run, core::Isometry::Identity(), nullptr,
-      centreSampling());
+  const TextureEvaluation result =
+      evaluateTextures(truthScene(), ".", kAbove, patches, run, core::Isometry::Identity(), nullptr,
+                       centreSampling());
   ASSERT_EQ(result.patches.size(), 1u);
   EXPECT_LT(result.patches[0].psnr_db, 30.0);
   EXPECT_NEAR(result.patches[0].shift_m, std::hypot(0.01, 0.005), 0.001);
@@ -112,8 +112,7 @@ TEST(TextureEvaluation, GroundTruthWithoutTextureDefinitionsIsAClearError) {
     evaluateTextures(truth, ".", kAbove, patches, run, core::Isometry::Identity(), nullptr);
     FAIL() << "expected an error";
   } catch (const core::Error& e) {
-    EXPECT_NE(std::string(e.what()).find("tiles has no definition"), std::string::npos)
-        << e.what();
+    EXPECT_NE(std::string(e.what()).find("tiles has no definition"), std::string::npos) << e.what();
   }
 }
 

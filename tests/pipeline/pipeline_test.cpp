@@ -2,8 +2,8 @@
 #include <sstream>
 
 #include <gtest/gtest.h>
-#include <opencv2/imgcodecs.hpp>
 #include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
 
 #include "support/synthetic_plane.h"
 #include "support/test_data.h"
@@ -71,8 +71,8 @@ void expectTexturedPatches(const fs::path& out, const RunSummary& summary) {
   const auto patches = nlohmann::json::parse(patches_file);
   for (const auto& patch : patches["patches"]) {
     ASSERT_FALSE(patch["texture"].is_null());
-    const cv::Mat bgra =
-        cv::imread((out / patch["texture"]["image"].get<std::string>()).string(), cv::IMREAD_UNCHANGED);
+    const cv::Mat bgra = cv::imread((out / patch["texture"]["image"].get<std::string>()).string(),
+                                    cv::IMREAD_UNCHANGED);
     ASSERT_EQ(bgra.type(), CV_8UC4);
     EXPECT_EQ(bgra.cols, patch["texture"]["width"].get<int>());
     std::size_t opaque = 0, on_a_square = 0;
@@ -89,8 +89,10 @@ void expectTexturedPatches(const fs::path& out, const RunSummary& summary) {
     EXPECT_GT(static_cast<double>(on_a_square), 0.85 * static_cast<double>(opaque));
   }
   std::ifstream obj(out / "patches.obj"), mtl(out / "patches.mtl");
-  const std::string obj_text((std::istreambuf_iterator<char>(obj)), std::istreambuf_iterator<char>());
-  const std::string mtl_text((std::istreambuf_iterator<char>(mtl)), std::istreambuf_iterator<char>());
+  const std::string obj_text((std::istreambuf_iterator<char>(obj)),
+                             std::istreambuf_iterator<char>());
+  const std::string mtl_text((std::istreambuf_iterator<char>(mtl)),
+                             std::istreambuf_iterator<char>());
   EXPECT_NE(obj_text.find("mtllib patches.mtl"), std::string::npos);
   EXPECT_NE(obj_text.find("usemtl patch_"), std::string::npos);
   EXPECT_NE(obj_text.find("\nvt "), std::string::npos);

@@ -81,7 +81,8 @@ TEST(BitmapBuilder, ASmoothFieldIsReproducedAtTheTexelCentres) {
       if (bitmap.state.at<std::uint8_t>(r, c) != static_cast<int>(TexelState::kObserved)) continue;
       const Eigen::Vector2d uv = bitmap.grid.uvOf(c + 0.5, r + 0.5);
       const cv::Vec3b truth = fieldAt(uv.x(), uv.y());
-      for (int k = 0; k < 3; ++k) squared += std::pow(bitmap.image.at<cv::Vec3b>(r, c)[k] - truth[k], 2);
+      for (int k = 0; k < 3; ++k)
+        squared += std::pow(bitmap.image.at<cv::Vec3b>(r, c)[k] - truth[k], 2);
       counted += 3;
     }
   }
@@ -121,8 +122,9 @@ TEST(BitmapBuilder, SmallHolesAreInpaintedAndMarkedLargeOnesStayEmpty) {
   EXPECT_GT(bitmap.inpainted, 0u);
   // The inpainted colour continues its surroundings.
   const Eigen::Vector2d d = Eigen::Vector2d(0.106, 0.106) - bitmap.grid.origin_uv;
-  const cv::Vec3b filled = bitmap.image.at<cv::Vec3b>(
-      static_cast<int>(d.dot(bitmap.grid.y_axis) / 0.005), static_cast<int>(d.dot(bitmap.grid.x_axis) / 0.005));
+  const cv::Vec3b filled =
+      bitmap.image.at<cv::Vec3b>(static_cast<int>(d.dot(bitmap.grid.y_axis) / 0.005),
+                                 static_cast<int>(d.dot(bitmap.grid.x_axis) / 0.005));
   const cv::Vec3b truth = fieldAt(0.106, 0.106);
   for (int k = 0; k < 3; ++k) EXPECT_NEAR(filled[k], truth[k], 12);
 }

@@ -53,8 +53,8 @@ struct RunSummary {
   std::size_t bitmaps = 0;
   std::size_t bitmap_texels_observed = 0;
   std::size_t bitmap_texels_inpainted = 0;
-  std::size_t bitmap_bytes = 0;         // 3 bytes per texel of the grids, as held in memory
-  double bitmap_ms_per_m2 = 0.0;        // build time over observed area, every version built
+  std::size_t bitmap_bytes = 0;   // 3 bytes per texel of the grids, as held in memory
+  double bitmap_ms_per_m2 = 0.0;  // build time over observed area, every version built
   // ATE of the fused poses against the recording's ground truth, when it has one.
   std::optional<eval::AteResult> ate;
   std::vector<StageFigures> stages;

@@ -2,11 +2,11 @@
 // The stages of `tessera run`, as plain classes with a narrow process()/flush() call.
 // They know nothing of TBB: flow_graph.h wires them. Each stage is called by one node at a
 // time (serial nodes), so none of them locks.
+#include <atomic>
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
 #include <fstream>
-#include <atomic>
 #include <functional>
 #include <map>
 #include <optional>
@@ -17,9 +17,9 @@
 #include "tessera/fusion/tracker.h"
 #include "tessera/fusion/tsdf_map.h"
 #include "tessera/pipeline/stage_timer.h"
+#include "tessera/planes/frame_sharpness.h"
 #include "tessera/planes/patch_map.h"
 #include "tessera/planes/plane_alignment.h"
-#include "tessera/planes/frame_sharpness.h"
 #include "tessera/planes/plane_detector.h"
 #include "tessera/texture/bitmap_builder.h"
 
@@ -146,7 +146,8 @@ class PlaneStage {
 
  private:
   void count(const std::vector<planes::PatchEvent>& events);
-  std::vector<planes::PatchSnapshot> snapshotsOf(const std::vector<planes::PatchEvent>& events) const;
+  std::vector<planes::PatchSnapshot> snapshotsOf(
+      const std::vector<planes::PatchEvent>& events) const;
   // Every N-th frame (patches.colour_every_n_frames), and any frame the camera has moved
   // more than 5 cm or 3 degrees from since the last one sampled.
   bool wantsColours(std::uint64_t index, const core::Isometry& T_W_C) const;

@@ -125,8 +125,7 @@ class PatchMap {
   // over the squared distance, times `sharpness` (SharpnessGauge) and the recency factor.
   // Needs rgb registered to depth.
   void addColours(const core::Frame& frame, const PlaneDetection& detection,
-                  const core::Isometry& T_W_C, const std::vector<int>& ids,
-                  double sharpness = 1.0);
+                  const core::Isometry& T_W_C, const std::vector<int>& ids, double sharpness = 1.0);
 
   // Closes frame `frame_index` (patches seen in it are the ones add() touched since the last
   // call) and returns the finalizations and retirements it caused.
