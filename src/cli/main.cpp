@@ -2,6 +2,7 @@
 #include <spdlog/spdlog.h>
 #include <CLI/CLI.hpp>
 
+#include "devices_command.h"
 #include "eval_command.h"
 #include "record_command.h"
 #include "run_command.h"
@@ -25,6 +26,7 @@ int main(int argc, char** argv) {
   CLI::App* synth = tessera::cli::addSynthCommand(app, synth_args);
   tessera::cli::EvalArguments eval_args;
   CLI::App* eval = tessera::cli::addEvalCommand(app, eval_args);
+  CLI::App* devices = tessera::cli::addDevicesCommand(app);
 
   CLI11_PARSE(app, argc, argv);
   try {
@@ -37,5 +39,6 @@ int main(int argc, char** argv) {
   if (record->parsed()) return tessera::cli::recordCommand(record_args);
   if (synth->parsed()) return tessera::cli::synthCommand(synth_args);
   if (eval->parsed()) return tessera::cli::evalCommand(eval_args);
+  if (devices->parsed()) return tessera::cli::devicesCommand();
   return 0;
 }

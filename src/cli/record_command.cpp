@@ -6,10 +6,12 @@
 #include <spdlog/spdlog.h>
 
 #include "progress_line.h"
+#include "stop_request.h"
 #include "tessera/core/error.h"
 #include "tessera/drivers/oni/ground_truth_file.h"
 #include "tessera/drivers/oni/oni_source.h"
 #include "tessera/drivers/oni/oni_writer.h"
+#include "tessera/drivers/openni2/openni2_source.h"
 #include "tessera/drivers/synthetic/renderer.h"
 #include "tessera/drivers/synthetic/scene_ground_truth.h"
 
@@ -94,6 +96,42 @@ int recordFrames(core::FrameSource& source, const RecordArguments& args,
   return 0;
 }
 
+// A live device records itself through OpenNI2's Recorder while this reads it, until
+// --max-frames, Ctrl-C, or the device is gone for good.
+int recordLive(const RecordArguments& args) {
+  SourceArguments source_args = args.source_args;
+  source_args.record_path = args.output;
+  auto source = openSource(args.source, source_args);
+  const std::atomic<bool>& stop = stopOnInterrupt();
+  ProgressLine progress;
+  const auto start = std::chrono::steady_clock::now();
+  std::size_t frames = 0;
+  std::string end_problem;
+  spdlog::info("recording {} to {}; Ctrl-C stops", source->name(), args.output);
+  while (!stop && (args.source_args.max_frames == 0 || frames < args.source_args.max_frames)) {
+    core::ReadResult result = source->read();
+    if (result.status == core::ReadStatus::kEndOfData) {
+      end_problem = result.problem;
+      break;
+    }
+    if (result.status == core::ReadStatus::kFrame) ++frames;
+    if (!result.problem.empty()) spdlog::warn("{}", result.problem);
+    const double elapsed =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    progress.update({frames, std::nullopt, elapsed, 0});
+  }
+  progress.finish();
+  const core::LiveStats live = source->liveStats();
+  source.reset();  // closes the recording
+  if (!end_problem.empty()) spdlog::warn("{}", end_problem);
+  spdlog::info("{} frames sent by the device, all recorded to {}{}", live.frames_delivered,
+               args.output,
+               live.reconnects > 0 ? fmt::format(" and {} more segments after reconnects",
+                                                 live.reconnects)
+                                   : "");
+  return 0;
+}
+
 }  // namespace
 
 CLI::App* addRecordCommand(CLI::App& app, RecordArguments& args) {
@@ -101,7 +139,9 @@ CLI::App* addRecordCommand(CLI::App& app, RecordArguments& args) {
       "record", "Convert SOURCE into an OpenNI2 recording OUT.oni (+ OUT.gt.json)");
   record
       ->add_option("SOURCE", args.source,
-                   "Dataset folder, .oni recording or synthetic scene (.yaml) to convert")
+                   "Dataset folder, .oni recording or synthetic scene (.yaml) to convert, or a "
+                   "live device (openni2://[URI]) to record through OpenNI2's Recorder until "
+                   "--max-frames or Ctrl-C")
       ->required();
   record->add_option("OUT", args.output, "The .oni file to write")->required();
   addCodecOptions(record, args);
@@ -111,6 +151,7 @@ CLI::App* addRecordCommand(CLI::App& app, RecordArguments& args) {
 
 int recordCommand(const RecordArguments& args) {
   try {
+    if (drivers::openni2::parseOpenNi2Uri(args.source)) return recordLive(args);
     auto source = openSource(args.source, args.source_args);
     return recordFrames(*source, args, nlohmann::json::object());
   } catch (const core::Error& e) {

@@ -6,6 +6,7 @@
 
 #include "progress_line.h"
 #include "source_factory.h"
+#include "stop_request.h"
 #include "tessera/core/error.h"
 #include "tessera/pipeline/flow_graph.h"
 #include "tessera/pipeline/run.h"
@@ -16,8 +17,9 @@ CLI::App* addRunCommand(CLI::App& app, RunArguments& args) {
   CLI::App* run = app.add_subcommand(
       "run", "Build a map from SOURCE and write it, with report.json and stats.jsonl, to --out");
   run->add_option("SOURCE", args.source,
-                  "OpenNI2 recording (.oni) or recorded dataset folder (TUM RGB-D, 7-Scenes, "
-                  "Redwood, slambook). Default: recordings/office.oni (rendered by the build)");
+                  "OpenNI2 recording (.oni), recorded dataset folder (TUM RGB-D, 7-Scenes, "
+                  "Redwood, slambook), synthetic scene (.yaml) or live device (openni2://, "
+                  "openni2://URI). Default: recordings/office.oni (rendered by the build)");
   run->add_option("--config", args.config, "YAML config (keys as in config/default.yaml)")
       ->check(CLI::ExistingFile);
   run->add_option("--out", args.out_dir, "Output folder (created if needed)")
@@ -31,6 +33,9 @@ CLI::App* addRunCommand(CLI::App& app, RunArguments& args) {
                   "ground truth")
       ->check(CLI::IsMember({"track", "gt"}))
       ->capture_default_str();
+  run->add_option("--record", args.source_args.record_path,
+                  "Live devices: also record what the device sends to this .oni file "
+                  "(OpenNI2's Recorder, lossless; replays with `tessera run FILE`)");
   addSourceOptions(*run, args.source_args);
   return run;
 }
@@ -54,6 +59,7 @@ int runCommand(const RunArguments& args) {
         args.poses == "gt" ? pipeline::PoseSource::kGroundTruth : pipeline::PoseSource::kTrack;
     if (args.source_args.max_frames > 0) run_options.max_frames = args.source_args.max_frames;
     run_options.on_progress = [&progress](const pipeline::Progress& p) { progress.update(p); };
+    if (source->isLive()) run_options.stop = &stopOnInterrupt();
 
     const pipeline::RunSummary summary = pipeline::runPipeline(*source, config, run_options);
     progress.finish();
@@ -63,6 +69,17 @@ int runCommand(const RunArguments& args) {
     if (summary.poses == "track") {
       spdlog::info("tracking: {} frames lost, {} restarts", summary.tracking_losses,
                    summary.tracking_restarts);
+    }
+    if (summary.live) {
+      const core::LiveStats& live = summary.live_stats;
+      spdlog::info("live: {} frames sent, {} dropped ({:.1f} %), latency p50 {:.0f} ms, p95 {:.0f} "
+                   "ms; {} device losses, {} reconnects",
+                   live.frames_delivered, live.frames_dropped,
+                   live.frames_delivered > 0 ? 100.0 * static_cast<double>(live.frames_dropped) /
+                                                   static_cast<double>(live.frames_delivered)
+                                             : 0.0,
+                   summary.latency_ms_p50.value_or(0.0), summary.latency_ms_p95.value_or(0.0),
+                   live.device_losses, live.reconnects);
     }
     if (summary.ate) {
       spdlog::info("ATE against the recording's ground truth: {:.1f} mm RMSE over {} poses",

@@ -8,6 +8,7 @@
 #include "tessera/core/error.h"
 #include "tessera/drivers/dataset_source.h"
 #include "tessera/drivers/oni/oni_source.h"
+#include "tessera/drivers/openni2/openni2_source.h"
 #include "tessera/drivers/synthetic/renderer.h"
 
 namespace tessera::cli {
@@ -30,12 +31,46 @@ void addSourceOptions(CLI::App& command, SourceArguments& args) {
       ->check(CLI::PositiveNumber);
   command.add_option("--max-frames", args.max_frames, "Stop after this many frames (0: all)")
       ->capture_default_str();
+  command
+      .add_option("--depth-mode", args.depth_mode,
+                  "Live devices: depth stream mode WIDTHxHEIGHT@FPS (`tessera devices` lists them)")
+      ->capture_default_str();
+  command.add_option("--colour-mode", args.colour_mode, "Live devices: colour stream mode")
+      ->capture_default_str();
+  command
+      .add_option("--reconnect-timeout", args.reconnect_timeout_s,
+                  "Live devices: seconds to wait for an unplugged or stalled device to come back "
+                  "before the run ends with the map exported")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  command
+      .add_option("--frame-timeout", args.frame_timeout_ms,
+                  "Live devices: milliseconds without a frame after which the stream counts as "
+                  "stalled")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
 }
 
 std::unique_ptr<core::FrameSource> openSource(const std::string& spec,
                                               const SourceArguments& args) {
   std::optional<core::Intrinsics> intrinsics;
   if (!args.intrinsics.empty()) intrinsics = core::parseIntrinsicsSpec(args.intrinsics);
+  if (const auto uri = drivers::openni2::parseOpenNi2Uri(spec)) {
+    drivers::openni2::OpenNi2Options options;
+    options.uri = *uri;
+    options.intrinsics = intrinsics;
+    options.depth_mode = drivers::openni2::parseVideoMode(args.depth_mode);
+    options.colour_mode = drivers::openni2::parseVideoMode(args.colour_mode);
+    options.reconnect_timeout_s = args.reconnect_timeout_s;
+    options.frame_timeout_ms = args.frame_timeout_ms;
+    options.record_path = args.record_path;
+    return std::make_unique<drivers::openni2::OpenNi2Source>(options);
+  }
+  if (!args.record_path.empty()) {
+    throw core::ConfigError(fmt::format(
+        "--record: only live devices record while running; convert {} with `tessera record`",
+        spec));
+  }
   std::error_code ec;
   if (fs::is_directory(spec, ec)) {
     drivers::DatasetOptions options;
@@ -55,8 +90,8 @@ std::unique_ptr<core::FrameSource> openSource(const std::string& spec,
   if (fs::exists(spec, ec)) {
     throw core::SourceError(fmt::format(
         "{}: not a source tessera can read; SOURCE must be an OpenNI2 recording (.oni), a "
-        "synthetic scene (.yaml) or a recorded dataset folder (TUM RGB-D, 7-Scenes, Redwood or "
-        "slambook layout)",
+        "synthetic scene (.yaml), a recorded dataset folder (TUM RGB-D, 7-Scenes, Redwood or "
+        "slambook layout) or a live device (openni2://[URI])",
         spec));
   }
   throw core::SourceError(fmt::format("{}: no such file or folder", spec));

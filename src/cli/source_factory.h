@@ -16,11 +16,17 @@ struct SourceArguments {
   std::string intrinsics;          // --intrinsics
   double depth_units_per_m = 0.0;  // --depth-scale, 0: the source's own
   std::size_t max_frames = 0;      // --max-frames, 0: all
+  // Live devices (openni2://).
+  std::string depth_mode = "640x480@30";   // --depth-mode
+  std::string colour_mode = "640x480@30";  // --colour-mode
+  double reconnect_timeout_s = 10.0;       // --reconnect-timeout
+  int frame_timeout_ms = 2000;             // --frame-timeout
+  std::string record_path;  // set by `run --record` and `record`: the device records itself
 };
 
 void addSourceOptions(CLI::App& command, SourceArguments& args);
 
-// Opens a dataset folder or an .oni recording. Throws core::SourceError naming SOURCE and
+// Opens a dataset folder, an .oni recording, a synthetic scene or a live device (openni2://). Throws core::SourceError naming SOURCE and
 // listing what tessera can read, or core::ConfigError for bad --intrinsics.
 std::unique_ptr<core::FrameSource> openSource(const std::string& spec, const SourceArguments& args);
 

@@ -2,7 +2,9 @@
 
 #include <sys/resource.h>
 
+#include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <fstream>
 
 #include <fmt/format.h>
@@ -37,6 +39,15 @@ void createOutputDir(const std::filesystem::path& dir) {
   }
 }
 
+// The p-quantile (nearest rank) of `values`; nothing when there are none.
+std::optional<double> percentile(std::vector<double> values, double p) {
+  if (values.empty()) return std::nullopt;
+  const auto rank = static_cast<std::size_t>(std::ceil(p * static_cast<double>(values.size())));
+  const std::size_t k = std::clamp<std::size_t>(rank, 1, values.size()) - 1;
+  std::nth_element(values.begin(), values.begin() + static_cast<long>(k), values.end());
+  return values[k];
+}
+
 }  // namespace
 
 RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
@@ -47,7 +58,7 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
   std::optional<std::size_t> total = source.frameCount();
   if (total && options.max_frames) total = std::min(*total, *options.max_frames);
 
-  SourceStage source_stage(source, options.max_frames);
+  SourceStage source_stage(source, options.max_frames, options.stop);
   TrackingStage tracking_stage(config.tracker, options.poses);
   IntegrationStage integration_stage(config.tsdf, threads);
   planes::PlaneAlignmentConfig alignment = config.pose_correction;
@@ -59,7 +70,8 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
 
   const auto start = std::chrono::steady_clock::now();
   runGraph(source_stage, tracking_stage, integration_stage, plane_stage, texture_stage, sink,
-           {threads, config.pipeline.max_frames_in_flight});
+           {threads, source.isLive() ? config.pipeline.live_frames_in_flight
+                                     : config.pipeline.max_frames_in_flight});
   const double wall_s =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 
@@ -73,6 +85,11 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
   summary.tracking_losses = tracking_stage.trackingLosses();
   summary.tracking_restarts = tracking_stage.trackingRestarts();
   summary.source_end_problem = source_stage.endProblem();
+  summary.live = source.isLive();
+  summary.live_stats = source.liveStats();
+  summary.source_interruptions = sink.interruptions();
+  summary.latency_ms_p50 = percentile(sink.latenciesMs(), 0.50);
+  summary.latency_ms_p95 = percentile(sink.latenciesMs(), 0.95);
   summary.wall_s = wall_s;
   summary.fps = wall_s > 0.0 ? static_cast<double>(summary.frames) / wall_s : 0.0;
   summary.ate = eval::absoluteTrajectoryError(sink.estimate(), sink.groundTruth());
@@ -120,7 +137,9 @@ void writeReport(const RunSummary& summary, const std::filesystem::path& path) {
   json report = {
       {"source", summary.source},
       {"frames", summary.frames},
-      {"frames_dropped", 0},  // replay never drops; live sources arrive in a later stage
+      {"live", summary.live},
+      // Replay never drops; a live device's frames that the busy pipeline never read do.
+      {"frames_dropped", summary.live_stats.frames_dropped},
       {"frames_bad", summary.frames_bad},
       {"frames_integrated", summary.frames_integrated},
       {"frames_without_pose", summary.frames_without_pose},
@@ -147,6 +166,17 @@ void writeReport(const RunSummary& summary, const std::filesystem::path& path) {
   report["ate_m"] = summary.ate ? json(summary.ate->rmse_m) : json(nullptr);
   report["ate_max_m"] = summary.ate ? json(summary.ate->max_m) : json(nullptr);
   report["ate_pairs"] = summary.ate ? summary.ate->pairs : 0;
+  const auto optional = [](const std::optional<double>& v) { return v ? json(*v) : json(nullptr); };
+  report["frames_delivered"] =
+      summary.live ? json(summary.live_stats.frames_delivered) : json(nullptr);
+  report["drop_rate"] = summary.live && summary.live_stats.frames_delivered > 0
+                            ? json(static_cast<double>(summary.live_stats.frames_dropped) /
+                                   static_cast<double>(summary.live_stats.frames_delivered))
+                            : json(nullptr);
+  report["latency_ms_p50"] = optional(summary.latency_ms_p50);
+  report["latency_ms_p95"] = optional(summary.latency_ms_p95);
+  report["device_losses"] = summary.live_stats.device_losses;
+  report["device_reconnects"] = summary.live_stats.reconnects;
   report["source_end_problem"] =
       summary.source_end_problem.empty() ? json(nullptr) : json(summary.source_end_problem);
   // Figures of stages that do not exist yet: null, never a made-up value.

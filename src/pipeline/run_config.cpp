@@ -7,8 +7,10 @@ namespace tessera::pipeline {
 
 void readConfig(const core::ConfigSection& section, PipelineConfig& config) {
   section.read("max_frames_in_flight", config.max_frames_in_flight);
-  if (config.max_frames_in_flight < 1) {
-    throw core::ConfigError("pipeline: max_frames_in_flight must be at least 1");
+  section.read("live_frames_in_flight", config.live_frames_in_flight);
+  if (config.max_frames_in_flight < 1 || config.live_frames_in_flight < 1) {
+    throw core::ConfigError(
+        "pipeline: max_frames_in_flight and live_frames_in_flight must be at least 1");
   }
 }
 

@@ -1,5 +1,7 @@
 #include "tessera/pipeline/stages.h"
 
+#include <chrono>
+
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 #include <nlohmann/json.hpp>
@@ -10,11 +12,16 @@
 
 namespace tessera::pipeline {
 
-SourceStage::SourceStage(core::FrameSource& source, std::optional<std::size_t> max_frames)
-    : source_(source), max_frames_(max_frames) {}
+SourceStage::SourceStage(core::FrameSource& source, std::optional<std::size_t> max_frames,
+                         const std::atomic<bool>* stop)
+    : source_(source), max_frames_(max_frames), stop_(stop) {}
 
 std::optional<core::Frame> SourceStage::next() {
   while (!max_frames_ || frames_read_ < *max_frames_) {
+    if (stop_ != nullptr && stop_->load()) {
+      spdlog::info("{}: stopped on request after {} frames", source_.name(), frames_read_);
+      return std::nullopt;
+    }
     core::ReadResult result;
     {
       ScopedStageTime time(timer_);
@@ -28,6 +35,13 @@ std::optional<core::Frame> SourceStage::next() {
         ++bad_frames_;
         spdlog::warn("{}: skipped {}", source_.name(), result.problem);
         break;
+      case core::ReadStatus::kInterrupted: {
+        spdlog::warn("{}; finalizing the patches seen so far", result.problem);
+        core::Frame marker;
+        marker.source_interrupted = true;
+        marker.index = frames_read_;
+        return marker;
+      }
       case core::ReadStatus::kEndOfData:
         if (!result.problem.empty()) {
           end_problem_ = result.problem;
@@ -67,6 +81,11 @@ std::optional<core::Isometry> TrackingStage::poseOf(const core::Frame& frame,
 
 TrackedFrame TrackingStage::process(core::Frame frame) {
   TrackedFrame tracked;
+  if (frame.source_interrupted) {
+    tracked.skip_reason = "the source was interrupted";
+    tracked.frame = std::move(frame);
+    return tracked;
+  }
   {
     ScopedStageTime time(timer_);
     try {
@@ -92,6 +111,10 @@ FusedFrame IntegrationStage::process(TrackedFrame tracked) {
   fused.T_W_C = tracked.T_W_C;
   fused.skip_reason = std::move(tracked.skip_reason);
   fused.tracking_ms = tracked.tracking_ms;
+  if (tracked.frame.source_interrupted) {
+    fused.frame = std::move(tracked.frame);
+    return fused;
+  }
   {
     ScopedStageTime time(timer_);
     try {
@@ -110,6 +133,12 @@ FusedFrame IntegrationStage::process(TrackedFrame tracked) {
     }
   }
   fused.integration_ms = timer_.lastMs();
+  if (tracked.frame.arrival_ns > 0) {
+    const auto now_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(
+                            std::chrono::steady_clock::now().time_since_epoch())
+                            .count();
+    fused.latency_ms = static_cast<double>(now_ns - tracked.frame.arrival_ns) / 1e6;
+  }
   (fused.integrated ? integrated_ : skipped_)++;
   fused.tsdf_bytes = map_.memoryBytes();
   fused.frame = std::move(tracked.frame);
@@ -153,6 +182,13 @@ void PlaneStage::count(const std::vector<planes::PatchEvent>& events) {
 }
 
 FusedFrame PlaneStage::process(FusedFrame fused) {
+  if (fused.frame.source_interrupted) {
+    // What was seen before the interruption is kept even if the device never comes back.
+    fused.patch_events = finish(fused.finalized_patches);
+    fused.patches_live = map_.liveCount();
+    fused.patches_finalized = map_.finalizedCount();
+    return fused;
+  }
   {
     ScopedStageTime time(timer_);
     try {
@@ -251,7 +287,20 @@ StatsSink::StatsSink(const std::filesystem::path& out_dir, std::optional<std::si
 
 void StatsSink::process(const FusedFrame& fused) {
   ScopedStageTime time(timer_);
+  if (fused.frame.source_interrupted) {
+    ++interruptions_;
+    if (!write_failed_) {
+      stats_ << nlohmann::json{{"type", "source"},
+                               {"event", "interrupted"},
+                               {"frames_done", frames_done_}}
+                    .dump()
+             << '\n';
+      writePatchEvents(fused.patch_events);
+    }
+    return;
+  }
   ++frames_done_;
+  if (fused.latency_ms) latencies_ms_.push_back(*fused.latency_ms);
   // The map's pose of the frame: corrected against the patches when the plane stage did so.
   const std::optional<core::Isometry> pose =
       fused.T_W_C_planes ? fused.T_W_C_planes : fused.T_W_C;
@@ -280,6 +329,7 @@ void StatsSink::process(const FusedFrame& fused) {
                            {"patches_finalized", fused.patches_finalized},
                            {"textures_stored", 0}};
     if (!fused.integrated) line["skip_reason"] = fused.skip_reason;
+    if (fused.latency_ms) line["latency_ms"] = *fused.latency_ms;
     stats_ << line.dump() << '\n';
     writePatchEvents(fused.patch_events);
     if (pose) trajectory_ << eval::tumLine(fused.frame.timestamp_ns, *pose);

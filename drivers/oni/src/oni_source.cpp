@@ -4,7 +4,6 @@
 #include <cstring>
 #include <deque>
 #include <fstream>
-#include <mutex>
 
 #include <unistd.h>
 
@@ -16,22 +15,11 @@
 #include "oni_salvage.h"
 #include "tessera/core/error.h"
 #include "tessera/drivers/oni/ground_truth_file.h"
+#include "tessera/drivers/oni/openni_runtime.h"
 
 namespace tessera::drivers::oni {
 
 namespace {
-
-// OpenNI2 is initialised once per process and stays up: it is reference-free and its
-// shutdown would close every other open device.
-void ensureOpenNi() {
-  static std::once_flag once;
-  static openni::Status status = openni::STATUS_OK;
-  std::call_once(once, [] { status = openni::OpenNI::initialize(); });
-  if (status != openni::STATUS_OK) {
-    throw core::SourceError(
-        fmt::format("OpenNI2 failed to initialise: {}", openni::OpenNI::getExtendedError()));
-  }
-}
 
 struct TimedFrame {
   std::int64_t timestamp_us = 0;
@@ -170,10 +158,7 @@ void OniSource::open() {
           fmt::format("{}: the recording has no field of view and no {}; pass --intrinsics",
                       path.string(), sidecar.filename().string()));
     }
-    intrinsics_.fx = mode.getResolutionX() / (2.0 * std::tan(hfov / 2.0));
-    intrinsics_.fy = mode.getResolutionY() / (2.0 * std::tan(vfov / 2.0));
-    intrinsics_.cx = mode.getResolutionX() / 2.0;
-    intrinsics_.cy = mode.getResolutionY() / 2.0;
+    intrinsics_ = intrinsicsFromFov(mode.getResolutionX(), mode.getResolutionY(), hfov, vfov);
     intrinsics_origin_ = "the recording's field of view (principal point at the centre)";
   }
   intrinsics_.width = mode.getResolutionX();

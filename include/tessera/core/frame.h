@@ -18,7 +18,10 @@ struct ColourCamera {
 
 struct Frame {
   std::uint64_t index = 0;           // position in the source, from 0
-  std::int64_t timestamp_ns = 0;     // capture time
+  std::int64_t timestamp_ns = 0;     // capture time, on the source's clock
+  // Live sources: when the frame reached this host (steady clock, ns since its epoch), for the
+  // capture-to-fusion latency. 0 for recordings.
+  std::int64_t arrival_ns = 0;
   cv::Mat depth_mm;                  // CV_16UC1, millimetres, 0 = invalid
   cv::Mat rgb;                       // CV_8UC3 in R, G, B order
   Intrinsics intrinsics;             // of depth_mm (and of a registered rgb)
@@ -26,6 +29,9 @@ struct Frame {
   // Set when rgb comes from its own camera; empty when rgb is registered to depth, pixel for
   // pixel. core::registerColourToDepth() resamples it onto the depth image.
   std::optional<ColourCamera> colour_camera;
+  // A marker without images: the live source was interrupted here (device unplugged or
+  // stalled). The stages finalize what they have; frames after it may come from a new session.
+  bool source_interrupted = false;
 };
 
 }  // namespace tessera::core

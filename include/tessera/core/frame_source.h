@@ -12,12 +12,23 @@ enum class ReadStatus {
   kFrame,      // `frame` holds the next frame
   kBadFrame,   // this frame could not be read; `problem` says why; reading may go on
   kEndOfData,  // no more frames; `problem` is empty unless the data ended abnormally
+  // No frame now: the live device went away (`problem` says how). The next read() waits for it
+  // to come back and ends the stream if it does not.
+  kInterrupted,
 };
 
 struct ReadResult {
   ReadStatus status = ReadStatus::kEndOfData;
   Frame frame;
   std::string problem;
+};
+
+// What a live source counts while it streams.
+struct LiveStats {
+  std::size_t frames_delivered = 0;  // depth frames the device sent
+  std::size_t frames_dropped = 0;    // of those, never read: the pipeline was busy
+  std::size_t device_losses = 0;     // unplugged or stalled
+  std::size_t reconnects = 0;        // losses after which the device came back
 };
 
 // Not thread-safe: one caller (the pipeline's source node) reads at a time.
@@ -30,6 +41,10 @@ class FrameSource {
   virtual std::string name() const = 0;
   // Number of frames when known in advance (recordings), for progress display.
   virtual std::optional<std::size_t> frameCount() const { return std::nullopt; }
+  // A live device keeps sending whether or not it is read: the pipeline must not fall behind
+  // (it drops frames instead of queueing them). Recordings wait for the reader.
+  virtual bool isLive() const { return false; }
+  virtual LiveStats liveStats() const { return {}; }
 };
 
 }  // namespace tessera::core

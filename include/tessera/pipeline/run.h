@@ -1,5 +1,6 @@
 #pragma once
 // `tessera run` as a library call: source in, OUT/ files and a summary out.
+#include <atomic>
 #include <cstddef>
 #include <filesystem>
 #include <optional>
@@ -18,6 +19,7 @@ struct RunOptions {
   PoseSource poses = PoseSource::kTrack;
   std::optional<std::size_t> max_frames;
   StatsSink::ProgressCallback on_progress;  // may be empty
+  const std::atomic<bool>* stop = nullptr;  // set (e.g. by Ctrl-C) to end the stream early
 };
 
 struct StageFigures {
@@ -38,6 +40,12 @@ struct RunSummary {
   std::size_t tracking_losses = 0;
   std::size_t tracking_restarts = 0;
   std::string source_end_problem;  // non-empty when the source ended abnormally
+  // Live sources only (docs/METRICS.md): what the device sent and what the pipeline missed.
+  bool live = false;
+  core::LiveStats live_stats;
+  std::size_t source_interruptions = 0;
+  std::optional<double> latency_ms_p50;  // capture (arrival at the host) to end of fusion
+  std::optional<double> latency_ms_p95;
   double wall_s = 0.0;
   double fps = 0.0;
   double peak_rss_mb = 0.0;

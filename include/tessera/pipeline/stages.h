@@ -25,12 +25,16 @@
 
 namespace tessera::pipeline {
 
-// Pulls frames from a FrameSource; bad frames are counted, logged and skipped.
+// Pulls frames from a FrameSource; bad frames are counted, logged and skipped. An interrupted
+// live source gives a marker frame (Frame::source_interrupted) so that the stages finalize
+// what they have while the source waits for its device.
 class SourceStage {
  public:
-  SourceStage(core::FrameSource& source, std::optional<std::size_t> max_frames);
+  // `stop`, when given, ends the stream as soon as it is set (Ctrl-C on a live run).
+  SourceStage(core::FrameSource& source, std::optional<std::size_t> max_frames,
+              const std::atomic<bool>* stop = nullptr);
 
-  // The next good frame, or nothing at the end of the stream.
+  // The next good frame (or interruption marker), or nothing at the end of the stream.
   std::optional<core::Frame> next();
 
   std::size_t framesRead() const { return frames_read_; }
@@ -42,6 +46,7 @@ class SourceStage {
  private:
   core::FrameSource& source_;
   std::optional<std::size_t> max_frames_;
+  const std::atomic<bool>* stop_;
   std::size_t frames_read_ = 0;
   std::size_t bad_frames_ = 0;
   std::string end_problem_;
@@ -72,6 +77,8 @@ struct FusedFrame {
   std::size_t tsdf_blocks_released = 0;  // this frame, far behind the camera
   double tracking_ms = 0.0;
   double integration_ms = 0.0;
+  // Live sources: from the frame's arrival at this host to the end of its integration.
+  std::optional<double> latency_ms;
   // Filled by the plane stage.
   std::optional<core::Isometry> T_W_C_planes;  // the pose corrected against the patch map
   double planes_ms = 0.0;
@@ -225,6 +232,9 @@ class StatsSink {
   // The poses frames were fused at, and the recording's ground truth for the same frames.
   const eval::Trajectory& estimate() const { return estimate_; }
   const eval::Trajectory& groundTruth() const { return ground_truth_; }
+  // Capture-to-fusion latency of each frame of a live source, ms, in arrival order.
+  const std::vector<double>& latenciesMs() const { return latencies_ms_; }
+  std::size_t interruptions() const { return interruptions_; }
   const StageTimer& timer() const { return timer_; }
 
  private:
@@ -240,6 +250,8 @@ class StatsSink {
   std::size_t map_bytes_ = 0;
   eval::Trajectory estimate_;
   eval::Trajectory ground_truth_;
+  std::vector<double> latencies_ms_;
+  std::size_t interruptions_ = 0;
   bool write_failed_ = false;
   StageTimer timer_;
 };

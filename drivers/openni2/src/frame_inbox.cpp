@@ -1,0 +1,62 @@
+#include "frame_inbox.h"
+
+#include <chrono>
+
+namespace tessera::drivers::openni2 {
+
+std::int64_t steadyNowNs() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(
+             std::chrono::steady_clock::now().time_since_epoch())
+      .count();
+}
+
+void FrameInbox::clear() {
+  depth.clear();
+  colour.clear();
+  lost = false;
+}
+
+void InboxListener::onNewFrame(openni::VideoStream& stream) {
+  openni::VideoFrameRef ref;
+  if (stream.readFrame(&ref) != openni::STATUS_OK || !ref.isValid()) return;
+  CapturedFrame frame;
+  frame.arrival_ns = steadyNowNs();
+  frame.timestamp_us = static_cast<std::int64_t>(ref.getTimestamp());
+  frame.device_index = ref.getFrameIndex();
+  const int format = ref.getVideoMode().getPixelFormat();
+  const cv::Mat view(ref.getHeight(), ref.getWidth(), is_depth_ ? CV_16UC1 : CV_8UC3,
+                     const_cast<void*>(ref.getData()),
+                     static_cast<std::size_t>(ref.getStrideInBytes()));
+  if (format == openni::PIXEL_FORMAT_DEPTH_100_UM) {
+    view.convertTo(frame.image, CV_16UC1, 0.1);  // 100 um units to millimetres
+  } else {
+    frame.image = view.clone();
+  }
+  std::lock_guard lock(inbox_.mutex);
+  if (is_depth_) {
+    ++inbox_.delivered;
+    inbox_.depth.push_back(std::move(frame));
+    while (inbox_.depth.size() > inbox_.depth_capacity) {
+      inbox_.depth.pop_front();
+      ++inbox_.dropped;
+    }
+  } else {
+    inbox_.colour.push_back(std::move(frame));
+    while (inbox_.colour.size() > inbox_.colour_capacity) inbox_.colour.pop_front();
+  }
+  inbox_.changed.notify_all();
+}
+
+void DisconnectWatch::watch(const std::string& uri) {
+  std::lock_guard lock(inbox_.mutex);
+  uri_ = uri;
+}
+
+void DisconnectWatch::onDeviceDisconnected(const openni::DeviceInfo* info) {
+  std::lock_guard lock(inbox_.mutex);
+  if (info == nullptr || uri_ != info->getUri()) return;
+  inbox_.lost = true;
+  inbox_.changed.notify_all();
+}
+
+}  // namespace tessera::drivers::openni2
