@@ -19,8 +19,9 @@ int devicesCommand() {
   try {
     const auto devices = drivers::openni2::listDevices();
     if (devices.empty()) {
-      fmt::print("no OpenNI2 device found (is it plugged in, and does the user have access to "
-                 "its USB device?)\n");
+      fmt::print(
+          "no OpenNI2 device found (is it plugged in, and does the user have access to "
+          "its USB device?)\n");
       return 0;
     }
     for (const auto& device : devices) {

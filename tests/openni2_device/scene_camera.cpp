@@ -101,4 +101,9 @@ bool SceneCamera::present() {
   return !back_at_ || std::chrono::steady_clock::now() >= *back_at_;
 }
 
+std::optional<std::chrono::steady_clock::time_point> SceneCamera::backAt() {
+  std::lock_guard lock(mutex_);
+  return back_at_;
+}
+
 }  // namespace tessera::test

@@ -47,8 +47,8 @@ class SceneCamera {
   void renderIfNeeded();
   const RenderedFrame& frame(int index) const { return frames_[static_cast<std::size_t>(index)]; }
   int frameCount() const { return frame_count_; }
-  double fps() const { return fps_; }                 // delivery rate
-  int modeFps() const { return mode_fps_; }           // the scene's rate, as the mode says
+  double fps() const { return fps_; }        // delivery rate
+  int modeFps() const { return mode_fps_; }  // the scene's rate, as the mode says
   const core::Intrinsics& intrinsics() const { return intrinsics_; }
   bool colourRegistered() const { return colour_registered_; }
   std::string uri() const { return "tessera-test://" + scene_name_; }
@@ -58,6 +58,8 @@ class SceneCamera {
   std::optional<int> nextFrame(bool& unplugged);
   // True unless unplugged; a replugged device resumes where the scene has got to meanwhile.
   bool present();
+  // When an unplugged device comes back; nothing when it is present or gone for good.
+  std::optional<std::chrono::steady_clock::time_point> backAt();
 
  private:
   CameraSettings settings_;

@@ -8,9 +8,9 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
-#include <mutex>
 #include <cstring>
 #include <memory>
+#include <mutex>
 #include <thread>
 #include <vector>
 
@@ -139,8 +139,7 @@ class SceneDevice : public oni::driver::DeviceBase {
   SceneDevice(SceneCamera& camera, LostCallback on_lost, void* cookie)
       : camera_(camera), on_lost_(on_lost), cookie_(cookie) {
     const auto& k = camera.intrinsics();
-    depth_mode_ = {ONI_PIXEL_FORMAT_DEPTH_1_MM, k.width, k.height,
-                   camera.modeFps()};
+    depth_mode_ = {ONI_PIXEL_FORMAT_DEPTH_1_MM, k.width, k.height, camera.modeFps()};
     colour_mode_ = {ONI_PIXEL_FORMAT_RGB888, k.width, k.height, depth_mode_.fps};
     sensors_[0] = {ONI_SENSOR_DEPTH, 1, &depth_mode_};
     sensors_[1] = {ONI_SENSOR_COLOR, 1, &colour_mode_};
@@ -223,7 +222,8 @@ class SceneDevice : public oni::driver::DeviceBase {
   }
   bool anyStarted() {
     std::lock_guard lock(streams_mutex_);
-    return std::any_of(streams_.begin(), streams_.end(), [](const auto& s) { return s->started(); });
+    return std::any_of(streams_.begin(), streams_.end(),
+                       [](const auto& s) { return s->started(); });
   }
 
   SceneCamera& camera_;
@@ -272,23 +272,28 @@ class SceneDriver : public oni::driver::DriverBase {
   }
   void deviceClose(oni::driver::DeviceBase* device) override { delete device; }
 
-  // OpenNI2 asks here for a URI it does not know: a replugged device announces itself again.
-  OniStatus tryDevice(const char* uri) override {
-    if (!camera_ || std::strcmp(uri, info_.uri) != 0 || !camera_->present())
-      return ONI_STATUS_ERROR;
-    deviceConnected(&info_);
-    return ONI_STATUS_OK;
+  void shutdown() override {
+    if (replug_.joinable()) replug_.join();
   }
-  void shutdown() override {}
 
  private:
+  // The device went away: OpenNI2 forgets it. If it comes back, it announces itself again, as
+  // a USB hot-plug event makes a real driver do; only then can OpenNI2 open it again.
   static void lost(void* cookie) {
     auto* driver = static_cast<SceneDriver*>(cookie);
     driver->deviceDisconnected(&driver->info_);
+    if (const auto back_at = driver->camera_->backAt()) {
+      if (driver->replug_.joinable()) driver->replug_.join();
+      driver->replug_ = std::thread([driver, at = *back_at] {
+        std::this_thread::sleep_until(at);
+        driver->deviceConnected(&driver->info_);
+      });
+    }
   }
 
   std::unique_ptr<SceneCamera> camera_;
   OniDeviceInfo info_{};
+  std::thread replug_;
 };
 
 }  // namespace

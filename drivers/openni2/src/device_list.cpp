@@ -9,17 +9,28 @@ namespace tessera::drivers::openni2 {
 
 std::string pixelFormatName(int format) {
   switch (format) {
-    case openni::PIXEL_FORMAT_DEPTH_1_MM: return "depth 1 mm";
-    case openni::PIXEL_FORMAT_DEPTH_100_UM: return "depth 100 um";
-    case openni::PIXEL_FORMAT_SHIFT_9_2: return "shift 9.2";
-    case openni::PIXEL_FORMAT_SHIFT_9_3: return "shift 9.3";
-    case openni::PIXEL_FORMAT_RGB888: return "RGB888";
-    case openni::PIXEL_FORMAT_YUV422: return "YUV422";
-    case openni::PIXEL_FORMAT_YUYV: return "YUYV";
-    case openni::PIXEL_FORMAT_GRAY8: return "gray 8";
-    case openni::PIXEL_FORMAT_GRAY16: return "gray 16";
-    case openni::PIXEL_FORMAT_JPEG: return "JPEG";
-    default: return fmt::format("format {}", format);
+    case openni::PIXEL_FORMAT_DEPTH_1_MM:
+      return "depth 1 mm";
+    case openni::PIXEL_FORMAT_DEPTH_100_UM:
+      return "depth 100 um";
+    case openni::PIXEL_FORMAT_SHIFT_9_2:
+      return "shift 9.2";
+    case openni::PIXEL_FORMAT_SHIFT_9_3:
+      return "shift 9.3";
+    case openni::PIXEL_FORMAT_RGB888:
+      return "RGB888";
+    case openni::PIXEL_FORMAT_YUV422:
+      return "YUV422";
+    case openni::PIXEL_FORMAT_YUYV:
+      return "YUYV";
+    case openni::PIXEL_FORMAT_GRAY8:
+      return "gray 8";
+    case openni::PIXEL_FORMAT_GRAY16:
+      return "gray 16";
+    case openni::PIXEL_FORMAT_JPEG:
+      return "JPEG";
+    default:
+      return fmt::format("format {}", format);
   }
 }
 

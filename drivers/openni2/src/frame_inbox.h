@@ -28,7 +28,7 @@ struct FrameInbox {
   std::condition_variable changed;
   std::deque<CapturedFrame> depth;
   std::deque<CapturedFrame> colour;
-  std::size_t depth_capacity = 2;  // a busy reader loses the oldest depth frames
+  std::size_t depth_capacity = 2;   // a busy reader loses the oldest depth frames
   std::size_t colour_capacity = 8;  // enough to pair with any depth frame still held
   std::size_t delivered = 0;
   std::size_t dropped = 0;

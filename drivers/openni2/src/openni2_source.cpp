@@ -50,15 +50,15 @@ openni::VideoMode chooseMode(openni::Device& device, openni::SensorType type,
                         offered[i].getResolutionY(), offered[i].getFps(),
                         pixelFormatName(offered[i].getPixelFormat()));
   }
-  throw core::SourceError(fmt::format("{}: {} mode {} is not offered; the device offers: {}",
-                                      label, sensor, request.describe(), list));
+  throw core::SourceError(fmt::format("{}: {} mode {} is not offered; the device offers: {}", label,
+                                      sensor, request.describe(), list));
 }
 
 std::filesystem::path segmentPath(const std::filesystem::path& path, int segment) {
   if (segment == 1) return path;
   std::filesystem::path numbered = path;
-  numbered.replace_filename(fmt::format("{}-{}{}", path.stem().string(), segment,
-                                        path.extension().string()));
+  numbered.replace_filename(
+      fmt::format("{}-{}{}", path.stem().string(), segment, path.extension().string()));
   return numbered;
 }
 
@@ -134,16 +134,16 @@ void OpenNi2Source::State::connect() {
   const std::string label = deviceLabel(uri);
   auto c = std::make_unique<Connection>();
   if (c->device.open(uri.empty() ? openni::ANY_DEVICE : uri.c_str()) != openni::STATUS_OK) {
-    throw core::SourceError(fmt::format("{}: cannot open the device: {} (`tessera devices` lists "
-                                        "the devices OpenNI2 finds)",
-                                        label, openni::OpenNI::getExtendedError()));
+    throw core::SourceError(
+        fmt::format("{}: cannot open the device: {} (`tessera devices` lists "
+                    "the devices OpenNI2 finds)",
+                    label, openni::OpenNI::getExtendedError()));
   }
   uri = c->device.getDeviceInfo().getUri();
   watch.watch(uri);
-  const openni::VideoMode depth_mode =
-      chooseMode(c->device, openni::SENSOR_DEPTH, options.depth_mode,
-                 {openni::PIXEL_FORMAT_DEPTH_1_MM, openni::PIXEL_FORMAT_DEPTH_100_UM}, label,
-                 "depth");
+  const openni::VideoMode depth_mode = chooseMode(
+      c->device, openni::SENSOR_DEPTH, options.depth_mode,
+      {openni::PIXEL_FORMAT_DEPTH_1_MM, openni::PIXEL_FORMAT_DEPTH_100_UM}, label, "depth");
   const openni::VideoMode colour_mode =
       chooseMode(c->device, openni::SENSOR_COLOR, options.colour_mode,
                  {openni::PIXEL_FORMAT_RGB888}, label, "colour");
@@ -176,8 +176,8 @@ void OpenNi2Source::State::connect() {
                                         c->depth.getVerticalFieldOfView());
   }
   if (!intrinsics.valid()) {
-    throw core::SourceError(fmt::format(
-        "{}: the depth stream reports no field of view; pass --intrinsics", label));
+    throw core::SourceError(
+        fmt::format("{}: the depth stream reports no field of view; pass --intrinsics", label));
   }
   {
     std::lock_guard lock(inbox.mutex);
@@ -193,18 +193,19 @@ void OpenNi2Source::State::connect() {
   if (connection->depth.start() != openni::STATUS_OK ||
       connection->colour.start() != openni::STATUS_OK) {
     connection.reset();
-    throw core::SourceError(fmt::format("{}: the streams do not start: {}", label,
-                                        openni::OpenNI::getExtendedError()));
+    throw core::SourceError(
+        fmt::format("{}: the streams do not start: {}", label, openni::OpenNI::getExtendedError()));
   }
-  spdlog::info("{}: depth {} and colour {}, {} registration, intrinsics {}", deviceLabel(uri),
-               options.depth_mode.describe(), options.colour_mode.describe(),
-               hardware_registration ? "hardware"
-                                     : (options.colour_camera ? "host (--calibration)" : "no"),
-               intrinsics.describe());
+  spdlog::info(
+      "{}: depth {} and colour {}, {} registration, intrinsics {}", deviceLabel(uri),
+      options.depth_mode.describe(), options.colour_mode.describe(),
+      hardware_registration ? "hardware" : (options.colour_camera ? "host (--calibration)" : "no"),
+      intrinsics.describe());
   if (!hardware_registration && !options.colour_camera) {
-    spdlog::warn("{}: the device cannot register colour to depth and no --calibration was "
-                 "given: colour is used as if registered",
-                 deviceLabel(uri));
+    spdlog::warn(
+        "{}: the device cannot register colour to depth and no --calibration was "
+        "given: colour is used as if registered",
+        deviceLabel(uri));
   }
 }
 
@@ -215,8 +216,8 @@ void OpenNi2Source::State::startRecording() {
       c.recorder.attach(c.depth, /*allowLossyCompression=*/false) != openni::STATUS_OK ||
       c.recorder.attach(c.colour, false) != openni::STATUS_OK ||
       c.recorder.start() != openni::STATUS_OK) {
-    throw core::SourceError(fmt::format("{}: cannot record: {}", path.string(),
-                                        openni::OpenNI::getExtendedError()));
+    throw core::SourceError(
+        fmt::format("{}: cannot record: {}", path.string(), openni::OpenNI::getExtendedError()));
   }
   // The replay must use the intrinsics this run uses, not a guess from the field of view.
   oni::GroundTruthFile sidecar;
@@ -236,8 +237,8 @@ bool OpenNi2Source::State::reconnect() {
   spdlog::warn("{}: waiting up to {:.0f} s for the device to come back", label,
                options.reconnect_timeout_s);
   while (std::chrono::steady_clock::now() < deadline) {
-    std::this_thread::sleep_for(
-        std::min(pause, std::chrono::duration<double>(deadline - std::chrono::steady_clock::now())));
+    std::this_thread::sleep_for(std::min(
+        pause, std::chrono::duration<double>(deadline - std::chrono::steady_clock::now())));
     pause = std::min(pause * 2.0, std::chrono::duration<double>(2.0));
     try {
       connect();
@@ -261,10 +262,9 @@ core::ReadResult OpenNi2Source::State::nextFrame() {
                          [&] { return !inbox.depth.empty() || inbox.lost; });
   if (inbox.depth.empty()) {
     result.status = core::ReadStatus::kInterrupted;
-    result.problem =
-        inbox.lost ? fmt::format("{}: the device was unplugged", deviceLabel(uri))
-                   : fmt::format("{}: no depth frame for {} ms: the stream stalled",
-                                 deviceLabel(uri), options.frame_timeout_ms);
+    result.problem = inbox.lost ? fmt::format("{}: the device was unplugged", deviceLabel(uri))
+                                : fmt::format("{}: no depth frame for {} ms: the stream stalled",
+                                              deviceLabel(uri), options.frame_timeout_ms);
     return result;
   }
   CapturedFrame depth = std::move(inbox.depth.front());
@@ -275,8 +275,8 @@ core::ReadResult OpenNi2Source::State::nextFrame() {
                           inbox.colour.back().timestamp_us + tolerance_us >= depth.timestamp_us);
   };
   inbox.changed.wait_for(lock, std::chrono::microseconds(2 * period_us), has_later_colour);
-  auto nearest = std::min_element(
-      inbox.colour.begin(), inbox.colour.end(), [&](const auto& a, const auto& b) {
+  auto nearest =
+      std::min_element(inbox.colour.begin(), inbox.colour.end(), [&](const auto& a, const auto& b) {
         return std::llabs(a.timestamp_us - depth.timestamp_us) <
                std::llabs(b.timestamp_us - depth.timestamp_us);
       });

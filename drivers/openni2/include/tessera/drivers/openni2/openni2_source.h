@@ -29,9 +29,9 @@ struct OpenNi2Options {
   // Host-side registration when the device cannot register colour to depth itself: the colour
   // camera's intrinsics and pose (--calibration). Ignored when hardware registration works.
   std::optional<core::ColourCamera> colour_camera;
-  int frame_timeout_ms = 2000;       // no depth frame for this long: the stream has stalled
+  int frame_timeout_ms = 2000;        // no depth frame for this long: the stream has stalled
   double reconnect_timeout_s = 10.0;  // how long a lost device is waited for
-  std::size_t queue_frames = 2;      // frames held for a busy pipeline; older ones are dropped
+  std::size_t queue_frames = 2;       // frames held for a busy pipeline; older ones are dropped
   // Records what the device sends through OpenNI2's own Recorder (lossless), with an
   // OUT.gt.json sidecar holding the intrinsics. After a reconnect: OUT-2.oni, OUT-3.oni...
   std::filesystem::path record_path;
