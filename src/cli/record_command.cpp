@@ -124,11 +124,10 @@ int recordLive(const RecordArguments& args) {
   const core::LiveStats live = source->liveStats();
   source.reset();  // closes the recording
   if (!end_problem.empty()) spdlog::warn("{}", end_problem);
-  spdlog::info("{} frames sent by the device, all recorded to {}{}", live.frames_delivered,
-               args.output,
-               live.reconnects > 0 ? fmt::format(" and {} more segments after reconnects",
-                                                 live.reconnects)
-                                   : "");
+  spdlog::info(
+      "{} frames sent by the device, all recorded to {}{}", live.frames_delivered, args.output,
+      live.reconnects > 0 ? fmt::format(" and {} more segments after reconnects", live.reconnects)
+                          : "");
   return 0;
 }
 

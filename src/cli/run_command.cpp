@@ -19,7 +19,8 @@ CLI::App* addRunCommand(CLI::App& app, RunArguments& args) {
   run->add_option("SOURCE", args.source,
                   "OpenNI2 recording (.oni), recorded dataset folder (TUM RGB-D, 7-Scenes, "
                   "Redwood, slambook), synthetic scene (.yaml) or live device (openni2://, "
-                  "openni2://URI). Default: recordings/office.oni (rendered by the build)");
+                  "openni2://URI, v4l2:///dev/videoN?depth=/dev/videoM; docs/ROBOT.md). Default: "
+                  "recordings/office.oni (rendered by the build)");
   run->add_option("--config", args.config, "YAML config (keys as in config/default.yaml)")
       ->check(CLI::ExistingFile);
   run->add_option("--out", args.out_dir, "Output folder (created if needed)")
@@ -72,14 +73,15 @@ int runCommand(const RunArguments& args) {
     }
     if (summary.live) {
       const core::LiveStats& live = summary.live_stats;
-      spdlog::info("live: {} frames sent, {} dropped ({:.1f} %), latency p50 {:.0f} ms, p95 {:.0f} "
-                   "ms; {} device losses, {} reconnects",
-                   live.frames_delivered, live.frames_dropped,
-                   live.frames_delivered > 0 ? 100.0 * static_cast<double>(live.frames_dropped) /
-                                                   static_cast<double>(live.frames_delivered)
-                                             : 0.0,
-                   summary.latency_ms_p50.value_or(0.0), summary.latency_ms_p95.value_or(0.0),
-                   live.device_losses, live.reconnects);
+      spdlog::info(
+          "live: {} frames sent, {} dropped ({:.1f} %), latency p50 {:.0f} ms, p95 {:.0f} "
+          "ms; {} device losses, {} reconnects",
+          live.frames_delivered, live.frames_dropped,
+          live.frames_delivered > 0 ? 100.0 * static_cast<double>(live.frames_dropped) /
+                                          static_cast<double>(live.frames_delivered)
+                                    : 0.0,
+          summary.latency_ms_p50.value_or(0.0), summary.latency_ms_p95.value_or(0.0),
+          live.device_losses, live.reconnects);
     }
     if (summary.ate) {
       spdlog::info("ATE against the recording's ground truth: {:.1f} mm RMSE over {} poses",

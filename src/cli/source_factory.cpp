@@ -10,6 +10,7 @@
 #include "tessera/drivers/oni/oni_source.h"
 #include "tessera/drivers/openni2/openni2_source.h"
 #include "tessera/drivers/synthetic/renderer.h"
+#include "tessera/drivers/v4l2/v4l2_source.h"
 
 namespace tessera::cli {
 
@@ -66,6 +67,16 @@ std::unique_ptr<core::FrameSource> openSource(const std::string& spec,
     options.record_path = args.record_path;
     return std::make_unique<drivers::openni2::OpenNi2Source>(options);
   }
+  if (drivers::v4l2::isV4l2Uri(spec)) {
+    drivers::v4l2::V4l2Options options;
+    options.intrinsics = intrinsics;
+    options.stall_timeout_ms = args.frame_timeout_ms;
+    if (!args.record_path.empty()) {
+      throw core::ConfigError(
+          "--record: V4L2 devices do not record yet; record an OpenNI2 device, or replay");
+    }
+    return drivers::v4l2::openV4l2Source(spec, options);
+  }
   if (!args.record_path.empty()) {
     throw core::ConfigError(fmt::format(
         "--record: only live devices record while running; convert {} with `tessera record`",
@@ -91,7 +102,7 @@ std::unique_ptr<core::FrameSource> openSource(const std::string& spec,
     throw core::SourceError(fmt::format(
         "{}: not a source tessera can read; SOURCE must be an OpenNI2 recording (.oni), a "
         "synthetic scene (.yaml), a recorded dataset folder (TUM RGB-D, 7-Scenes, Redwood or "
-        "slambook layout) or a live device (openni2://[URI])",
+        "slambook layout) or a live device (openni2://[URI], v4l2://...)",
         spec));
   }
   throw core::SourceError(fmt::format("{}: no such file or folder", spec));

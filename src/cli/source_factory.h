@@ -26,8 +26,9 @@ struct SourceArguments {
 
 void addSourceOptions(CLI::App& command, SourceArguments& args);
 
-// Opens a dataset folder, an .oni recording, a synthetic scene or a live device (openni2://). Throws core::SourceError naming SOURCE and
-// listing what tessera can read, or core::ConfigError for bad --intrinsics.
+// Opens a dataset folder, an .oni recording, a synthetic scene or a live device (openni2://).
+// Throws core::SourceError naming SOURCE and listing what tessera can read, or core::ConfigError
+// for bad --intrinsics.
 std::unique_ptr<core::FrameSource> openSource(const std::string& spec, const SourceArguments& args);
 
 // The recording `tessera run` replays when no SOURCE is given: $TESSERA_RECORDINGS, then

@@ -176,6 +176,15 @@ core::ReadResult V4l2Source::read() {
     depth = depth_->next(options_.stall_timeout_ms);
   } while (depth.status == CaptureStatus::kTimeout);
   if (depth.status == CaptureStatus::kEnd) return endOfData(std::move(depth.problem));
+  const std::int64_t arrival_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(
+                                      std::chrono::steady_clock::now().time_since_epoch())
+                                      .count();
+  const std::uint32_t skipped = last_depth_sequence_ && depth.sequence > *last_depth_sequence_
+                                    ? depth.sequence - *last_depth_sequence_ - 1
+                                    : 0;
+  last_depth_sequence_ = depth.sequence;
+  stats_.frames_dropped += skipped;
+  stats_.frames_delivered += skipped + 1;
   const std::uint64_t index = frames_read_++;
   if (depth.status == CaptureStatus::kBadImage) return badFrame(index, std::move(depth.problem));
 
@@ -200,6 +209,7 @@ core::ReadResult V4l2Source::read() {
   core::Frame& frame = result.frame;
   frame.index = index;
   frame.timestamp_ns = depth.timestamp_ns;
+  frame.arrival_ns = arrival_ns;
   frame.depth_mm = std::move(depth_mm);
   frame.rgb = std::move(rgb);
   frame.intrinsics = intrinsics_;

@@ -44,6 +44,10 @@ class V4l2Source : public core::FrameSource {
 
   core::ReadResult read() override;
   std::string name() const override { return uri_; }
+  bool isLive() const override { return true; }
+  // Drops are the gaps in the depth node's frame sequence: frames the driver dropped because
+  // every buffer was still waiting for a busy reader.
+  core::LiveStats liveStats() const override { return stats_; }
 
   const core::Intrinsics& intrinsics() const { return intrinsics_; }
   bool hasColour() const { return colour_ != nullptr; }
@@ -67,6 +71,8 @@ class V4l2Source : public core::FrameSource {
   std::deque<CaptureResult> colour_queue_;  // oldest first
   std::string colour_problem_;              // the last bad colour frame, for the pairing message
   std::uint64_t frames_read_ = 0;
+  std::optional<std::uint32_t> last_depth_sequence_;
+  core::LiveStats stats_;
   bool ended_ = false;
 };
 
