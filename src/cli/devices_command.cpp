@@ -4,6 +4,7 @@
 #include <spdlog/spdlog.h>
 
 #include "tessera/core/error.h"
+#include "tessera/drivers/freenect/freenect_source.h"
 #include "tessera/drivers/openni2/device_list.h"
 
 namespace tessera::cli {
@@ -11,8 +12,9 @@ namespace tessera::cli {
 CLI::App* addDevicesCommand(CLI::App& app) {
   return app.add_subcommand(
       "devices",
-      "List the OpenNI2 devices this host can open (Kinect v1, Xtion...), with their stream "
-      "modes; pass one to `tessera run` as openni2://URI");
+      "List the live devices this host can open: Kinect v1 through libfreenect (freenect://N) "
+      "and OpenNI2 devices (Kinect v1, Xtion...) with their stream modes (openni2://URI). V4L2 "
+      "cameras are named by their /dev/video nodes (docs/ROBOT.md)");
 }
 
 int devicesCommand() {

@@ -22,8 +22,10 @@ void ProgressLine::update(const pipeline::Progress& progress) {
                          : 0.0;
   const std::string total =
       progress.frames_total ? fmt::format("/{}", *progress.frames_total) : std::string();
-  fmt::print(stderr, "\r\033[K  frame {}{}  {:.1f} frames/s  map {:.1f} MB", progress.frames_done,
-             total, fps, static_cast<double>(progress.map_bytes) / 1e6);
+  const std::string latency =
+      progress.latency_ms ? fmt::format("  latency {:.0f} ms", *progress.latency_ms) : "";
+  fmt::print(stderr, "\r\033[K  frame {}{}  {:.1f} frames/s  map {:.1f} MB{}", progress.frames_done,
+             total, fps, static_cast<double>(progress.map_bytes) / 1e6, latency);
   std::fflush(stderr);
 }
 

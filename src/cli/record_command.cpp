@@ -76,7 +76,7 @@ int recordFrames(core::FrameSource& source, const RecordArguments& args,
     ground_truth.addFrame(frame);
     const double elapsed =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    progress.update({writer->framesWritten(), source.frameCount(), elapsed, 0});
+    progress.update({writer->framesWritten(), source.frameCount(), elapsed, 0, std::nullopt});
   }
   progress.finish();
   if (!writer) throw core::SourceError(source.name() + ": no frame could be read");
@@ -118,7 +118,7 @@ int recordLive(const RecordArguments& args) {
     if (!result.problem.empty()) spdlog::warn("{}", result.problem);
     const double elapsed =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    progress.update({frames, std::nullopt, elapsed, 0});
+    progress.update({frames, std::nullopt, elapsed, 0, std::nullopt});
   }
   progress.finish();
   const core::LiveStats live = source->liveStats();

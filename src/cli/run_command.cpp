@@ -16,11 +16,12 @@ namespace tessera::cli {
 CLI::App* addRunCommand(CLI::App& app, RunArguments& args) {
   CLI::App* run = app.add_subcommand(
       "run", "Build a map from SOURCE and write it, with report.json and stats.jsonl, to --out");
-  run->add_option("SOURCE", args.source,
-                  "OpenNI2 recording (.oni), recorded dataset folder (TUM RGB-D, 7-Scenes, "
-                  "Redwood, slambook), synthetic scene (.yaml) or live device (openni2://, "
-                  "openni2://URI, v4l2:///dev/videoN?depth=/dev/videoM; docs/ROBOT.md). Default: "
-                  "recordings/office.oni (rendered by the build)");
+  run->add_option(
+      "SOURCE", args.source,
+      "OpenNI2 recording (.oni), recorded dataset folder (TUM RGB-D, 7-Scenes, "
+      "Redwood, slambook), synthetic scene (.yaml) or live device (openni2://, "
+      "openni2://URI, freenect://N, v4l2:///dev/videoN?depth=/dev/videoM; docs/ROBOT.md). Default: "
+      "recordings/office.oni (rendered by the build)");
   run->add_option("--config", args.config, "YAML config (keys as in config/default.yaml)")
       ->check(CLI::ExistingFile);
   run->add_option("--out", args.out_dir, "Output folder (created if needed)")

@@ -7,9 +7,11 @@
 
 #include "tessera/core/error.h"
 #include "tessera/drivers/dataset_source.h"
+#include "tessera/drivers/freenect/freenect_source.h"
 #include "tessera/drivers/oni/oni_source.h"
 #include "tessera/drivers/openni2/openni2_source.h"
 #include "tessera/drivers/synthetic/renderer.h"
+#include "tessera/drivers/v4l2/camera_calibration.h"
 #include "tessera/drivers/v4l2/v4l2_source.h"
 
 namespace tessera::cli {
@@ -45,6 +47,12 @@ void addSourceOptions(CLI::App& command, SourceArguments& args) {
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
   command
+      .add_option("--calibration", args.calibration,
+                  "Live OpenNI2 and libfreenect devices without hardware registration: YAML with "
+                  "the depth and colour intrinsics and T_RGB_D (layout of config/kinect_v2.yaml); "
+                  "tessera then registers colour to depth itself")
+      ->check(CLI::ExistingFile);
+  command
       .add_option("--frame-timeout", args.frame_timeout_ms,
                   "Live devices: milliseconds without a frame after which the stream counts as "
                   "stalled")
@@ -65,7 +73,29 @@ std::unique_ptr<core::FrameSource> openSource(const std::string& spec,
     options.reconnect_timeout_s = args.reconnect_timeout_s;
     options.frame_timeout_ms = args.frame_timeout_ms;
     options.record_path = args.record_path;
+    if (!args.calibration.empty()) {
+      const auto calibration = drivers::v4l2::loadCameraCalibration(args.calibration);
+      options.colour_camera = calibration.colour;
+      if (!options.intrinsics) options.intrinsics = calibration.depth;
+    }
     return std::make_unique<drivers::openni2::OpenNi2Source>(options);
+  }
+  if (drivers::freenect::parseFreenectUri(spec)) {
+    drivers::freenect::FreenectOptions options;
+    options.intrinsics = intrinsics;
+    options.reconnect_timeout_s = args.reconnect_timeout_s;
+    options.frame_timeout_ms = args.frame_timeout_ms;
+    if (!args.calibration.empty()) {
+      const auto calibration = drivers::v4l2::loadCameraCalibration(args.calibration);
+      options.colour_camera = calibration.colour;
+      if (!options.intrinsics) options.intrinsics = calibration.depth;
+    }
+    if (!args.record_path.empty()) {
+      throw core::ConfigError(
+          "--record: libfreenect devices do not record; open the Kinect through OpenNI2 "
+          "(openni2://) to record it");
+    }
+    return drivers::freenect::openFreenectSource(spec, options);
   }
   if (drivers::v4l2::isV4l2Uri(spec)) {
     drivers::v4l2::V4l2Options options;
@@ -102,7 +132,7 @@ std::unique_ptr<core::FrameSource> openSource(const std::string& spec,
     throw core::SourceError(fmt::format(
         "{}: not a source tessera can read; SOURCE must be an OpenNI2 recording (.oni), a "
         "synthetic scene (.yaml), a recorded dataset folder (TUM RGB-D, 7-Scenes, Redwood or "
-        "slambook layout) or a live device (openni2://[URI], v4l2://...)",
+        "slambook layout) or a live device (openni2://[URI], freenect://[N], v4l2://...)",
         spec));
   }
   throw core::SourceError(fmt::format("{}: no such file or folder", spec));

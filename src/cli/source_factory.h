@@ -21,6 +21,7 @@ struct SourceArguments {
   std::string colour_mode = "640x480@30";  // --colour-mode
   double reconnect_timeout_s = 10.0;       // --reconnect-timeout
   int frame_timeout_ms = 2000;             // --frame-timeout
+  std::string calibration;                 // --calibration: host-side colour registration
   std::string record_path;  // set by `run --record` and `record`: the device records itself
 };
 

@@ -1,5 +1,7 @@
 #include "tessera/fusion/tsdf_map.h"
 
+#include <fstream>
+
 #include <cstring>
 
 #include <fmt/format.h>
@@ -153,6 +155,19 @@ std::size_t TsdfMap::memoryBytes() const {
 }
 
 void writePly(const SurfaceMesh& mesh, const std::filesystem::path& path) {
+  if (mesh.vertices.empty()) {
+    // Open3D refuses to write an empty mesh; a run that fused nothing still gets a valid file.
+    std::ofstream out(path);
+    out << "ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\nproperty float y\n"
+           "property float z\nelement face 0\nproperty list uchar int vertex_indices\n"
+           "end_header\n";
+    out.close();
+    if (!out) {
+      throw core::Error(
+          fmt::format("{}: could not write the mesh (disk full or no permission?)", path.string()));
+    }
+    return;
+  }
   o3d::geometry::TriangleMesh o3d_mesh;
   o3d_mesh.vertices_ = mesh.vertices;
   o3d_mesh.vertex_colors_ = mesh.colors;

@@ -199,8 +199,8 @@ FusedFrame PlaneStage::process(FusedFrame fused) {
         fused.planes_detected = detection.planes.size();
         std::vector<planes::PlaneObservation> observations =
             planes::observationsOf(fused.frame, detection, *fused.T_W_C_planes);
-        if (const auto D = planes::alignToPatches(
-                map_, observations, fused.T_W_C_planes->translation(), alignment_)) {
+        if (const auto D = planes::alignToPatches(map_, observations,
+                                                  fused.T_W_C_planes->translation(), alignment_)) {
           correction_ = *D * correction_;
           fused.T_W_C_planes = *D * *fused.T_W_C_planes;
           for (auto& observation : observations) {
@@ -302,8 +302,7 @@ void StatsSink::process(const FusedFrame& fused) {
   ++frames_done_;
   if (fused.latency_ms) latencies_ms_.push_back(*fused.latency_ms);
   // The map's pose of the frame: corrected against the patches when the plane stage did so.
-  const std::optional<core::Isometry> pose =
-      fused.T_W_C_planes ? fused.T_W_C_planes : fused.T_W_C;
+  const std::optional<core::Isometry> pose = fused.T_W_C_planes ? fused.T_W_C_planes : fused.T_W_C;
   if (pose) estimate_[fused.frame.timestamp_ns] = *pose;
   if (fused.frame.T_W_C_gt) ground_truth_[fused.frame.timestamp_ns] = *fused.frame.T_W_C_gt;
   const std::size_t bitmap_bytes = bitmap_bytes_ ? bitmap_bytes_() : 0;
@@ -339,7 +338,9 @@ void StatsSink::process(const FusedFrame& fused) {
                     stats_path_.string());
     }
   }
-  if (on_progress_) on_progress_({frames_done_, frames_total_, elapsed_s, map_bytes_});
+  if (on_progress_) {
+    on_progress_({frames_done_, frames_total_, elapsed_s, map_bytes_, fused.latency_ms});
+  }
 }
 
 void StatsSink::writePatchEvents(const std::vector<planes::PatchEvent>& events) {

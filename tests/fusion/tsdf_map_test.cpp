@@ -1,3 +1,6 @@
+#include <fstream>
+#include <iterator>
+
 #include <gtest/gtest.h>
 
 #include "support/synthetic_plane.h"
@@ -121,3 +124,17 @@ TEST(TsdfMap, AllInvalidDepthAddsNothing) {
 
 }  // namespace
 }  // namespace tessera::fusion
+
+// A run that fused nothing (a live device lost before its first frame) still writes a valid,
+// empty mesh file rather than failing at export.
+TEST(TsdfMap, AnEmptyMeshIsWrittenAsAValidEmptyPly) {
+  const auto path = std::filesystem::temp_directory_path() / "tessera_empty_mesh.ply";
+  std::filesystem::remove(path);
+  tessera::fusion::writePly(tessera::fusion::SurfaceMesh{}, path);
+  std::ifstream in(path);
+  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_EQ(text.rfind("ply\n", 0), 0u);
+  EXPECT_NE(text.find("element vertex 0\n"), std::string::npos);
+  EXPECT_NE(text.find("element face 0\n"), std::string::npos);
+  EXPECT_NE(text.find("end_header\n"), std::string::npos);
+}

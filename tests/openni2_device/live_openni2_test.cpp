@@ -4,16 +4,19 @@
 #include <cmath>
 #include <fstream>
 
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
 
 #include "support/test_data.h"
 #include "tessera/core/error.h"
+#include "tessera/core/registration.h"
 #include "tessera/drivers/oni/oni_source.h"
 #include "tessera/drivers/openni2/device_list.h"
 #include "tessera/drivers/openni2/openni2_source.h"
 #include "tessera/drivers/synthetic/renderer.h"
+#include "tessera/drivers/v4l2/camera_calibration.h"
 #include "tessera/pipeline/run.h"
 
 namespace tessera {
@@ -113,6 +116,44 @@ TEST(LiveOpenNi2, FramesAreTheScenesViewsUnmirroredAndPaired) {
   EXPECT_NEAR(first.frame.intrinsics.fx, scene.sensor.intrinsics.fx, 1e-3);
 }
 
+// A device that cannot register colour (the scene's colour camera sits 2.5 cm beside the depth
+// camera): with the calibration, frames carry the colour camera and registering them brings
+// the colour much closer to the truth, the colour seen from the depth camera.
+TEST(LiveOpenNi2, WithoutHardwareRegistrationTheCalibrationRegistersColour) {
+  requireTestDevice();
+  const fs::path dir = test::freshTempDir();
+  const core::Intrinsics k = drivers::synthetic::SensorProfile::named("kinect_v1").intrinsics;
+  const std::string intrinsics =
+      fmt::format("{{width: {}, height: {}, fx: {}, fy: {}, cx: {}, cy: {}}}", k.width, k.height,
+                  k.fx, k.fy, k.cx, k.cy);
+  std::ofstream(dir / "calibration.yaml")
+      << "mirror: false\ndepth: " << intrinsics << "\ncolour: " << intrinsics
+      << "\nT_RGB_D: {rotation: [1, 0, 0, 0, 1, 0, 0, 0, 1], translation_m: [-0.025, 0, 0]}\n";
+  const auto calibration = drivers::v4l2::loadCameraCalibration(dir / "calibration.yaml");
+  OpenNi2Options options;
+  options.colour_camera = calibration.colour;
+  OpenNi2Source source(options);
+  EXPECT_FALSE(source.hardwareRegistration());
+  const core::ReadResult first = source.read();
+  ASSERT_EQ(first.status, core::ReadStatus::kFrame) << first.problem;
+  ASSERT_TRUE(first.frame.colour_camera);
+
+  auto scene = drivers::synthetic::loadScene(std::getenv("TESSERA_TEST_DEVICE_SCENE"));
+  const cv::Mat truth = drivers::synthetic::renderClean(scene, k, scene.cameraPose(0), 1).colour;
+  const cv::Mat registered = core::registerColourToDepth(first.frame);
+  cv::Mat valid = first.frame.depth_mm > 0;
+  const auto meanError = [&](const cv::Mat& rgb) {
+    cv::Mat rgb_f, diff;
+    rgb.convertTo(rgb_f, CV_32FC3);
+    cv::absdiff(rgb_f, truth, diff);
+    const cv::Scalar mean = cv::mean(diff, valid);
+    return (mean[0] + mean[1] + mean[2]) / 3.0;
+  };
+  const double raw_error = meanError(first.frame.rgb), registered_error = meanError(registered);
+  EXPECT_LT(registered_error, 0.6 * raw_error)
+      << "registered " << registered_error << ", as delivered " << raw_error;
+}
+
 // The device sends faster than this pipeline runs: what it cannot take is dropped and counted,
 // never queued, so the latency stays bounded.
 TEST(LiveOpenNi2, ABusyPipelineDropsFramesAndCountsThem) {
@@ -157,12 +198,15 @@ TEST(LiveOpenNi2, ARecordingMadeLiveReplaysToTheSameMap) {
   }
   const int sent = envInt("TESSERA_TEST_DEVICE_FRAMES");
   ASSERT_EQ(live.live_stats.frames_delivered, static_cast<std::size_t>(sent));
+  // OpenNI2's Recorder starts on its own thread and may miss the first frame of a heavily
+  // loaded run (the source waits 200 ms for it); it records every later frame.
   drivers::oni::OniSource recording(dir / "live.oni");
-  EXPECT_EQ(recording.frameCount(), std::optional<std::size_t>(sent));
+  ASSERT_TRUE(recording.frameCount());
+  EXPECT_GE(*recording.frameCount() + 1, static_cast<std::size_t>(sent));
+  EXPECT_LE(*recording.frameCount(), static_cast<std::size_t>(sent));
   EXPECT_NEAR(recording.intrinsics().fx, 525.0, 1e-3);  // from the sidecar the run wrote
   const pipeline::RunSummary replay = runInto(recording, dir / "replay");
-  EXPECT_EQ(replay.frames, static_cast<std::size_t>(sent));
-  EXPECT_EQ(live.frames + live.live_stats.frames_dropped, replay.frames);
+  EXPECT_EQ(replay.frames, *recording.frameCount());
 
   // The same planes: every live patch has a replayed twin within 2 degrees and 3 cm, with an
   // area within 15 %, and the meshes differ by under 5 % (apart from dropped frames, the two
@@ -207,7 +251,7 @@ TEST(LiveOpenNi2, AnUnpluggedDeviceIsWaitedForAndResumes) {
   EXPECT_EQ(summary.live_stats.reconnects, 1u);
   EXPECT_EQ(summary.source_interruptions, 2u);
   EXPECT_EQ(summary.live_stats.frames_delivered, static_cast<std::size_t>(frames - away));
-  EXPECT_EQ(summary.frames + summary.live_stats.frames_dropped,
+  EXPECT_EQ(summary.frames + summary.frames_bad + summary.live_stats.frames_dropped,
             static_cast<std::size_t>(frames - away));
   EXPECT_GT(summary.patches_finalized, 0u);
 
@@ -224,11 +268,15 @@ TEST(LiveOpenNi2, AnUnpluggedDeviceIsWaitedForAndResumes) {
   EXPECT_TRUE(interrupted);
   EXPECT_TRUE(finalized_then);
 
-  // Two recording segments, each playable: before the unplug and after the replug.
+  // Two recording segments, each playable: before the unplug and after the replug (each may
+  // miss its first frame, as above).
   drivers::oni::OniSource before(dir / "live.oni");
   drivers::oni::OniSource after(dir / "live-2.oni");
-  EXPECT_EQ(before.frameCount(), std::optional<std::size_t>(unplug_at));
-  EXPECT_EQ(after.frameCount(), std::optional<std::size_t>(frames - unplug_at - away));
+  ASSERT_TRUE(before.frameCount() && after.frameCount());
+  EXPECT_GE(*before.frameCount() + 1, static_cast<std::size_t>(unplug_at));
+  EXPECT_LE(*before.frameCount(), static_cast<std::size_t>(unplug_at));
+  EXPECT_GE(*after.frameCount() + 1, static_cast<std::size_t>(frames - unplug_at - away));
+  EXPECT_LE(*after.frameCount(), static_cast<std::size_t>(frames - unplug_at - away));
 }
 
 }  // namespace

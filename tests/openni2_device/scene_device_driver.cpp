@@ -203,7 +203,15 @@ class SceneDevice : public oni::driver::DeviceBase {
     while (!stop_) {
       std::this_thread::sleep_until(due);
       due += std::chrono::duration_cast<std::chrono::steady_clock::duration>(period);
-      if (!anyStarted()) continue;
+      // Frames flow once every stream created has started, so that depth and colour begin
+      // with the same frame.
+      if (!allStarted()) continue;
+      if (!started_) {
+        // The first frame a period later, as a camera's: OpenNI2 finishes starting the
+        // streams after the driver's start() returns and drops frames that come before.
+        started_ = true;
+        continue;
+      }
       bool unplugged = false;
       const std::optional<int> index = camera_.nextFrame(unplugged);
       if (unplugged) {
@@ -220,10 +228,10 @@ class SceneDevice : public oni::driver::DeviceBase {
       }
     }
   }
-  bool anyStarted() {
+  bool allStarted() {
     std::lock_guard lock(streams_mutex_);
-    return std::any_of(streams_.begin(), streams_.end(),
-                       [](const auto& s) { return s->started(); });
+    return !streams_.empty() && std::all_of(streams_.begin(), streams_.end(),
+                                            [](const auto& s) { return s->started(); });
   }
 
   SceneCamera& camera_;
@@ -236,6 +244,7 @@ class SceneDevice : public oni::driver::DeviceBase {
   std::mutex streams_mutex_;
   std::vector<std::shared_ptr<SceneStream>> streams_;
   std::atomic<bool> stop_{false};
+  bool started_ = false;  // emitter thread only
   std::thread emitter_;
 };
 

@@ -219,6 +219,9 @@ void OpenNi2Source::State::startRecording() {
     throw core::SourceError(
         fmt::format("{}: cannot record: {}", path.string(), openni::OpenNI::getExtendedError()));
   }
+  // OpenNI2's Recorder starts on its own thread and ignores frames until it has: give it a
+  // moment before the streams start, or it may miss their first frame (seen under load).
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));
   // The replay must use the intrinsics this run uses, not a guess from the field of view.
   oni::GroundTruthFile sidecar;
   sidecar.setIntrinsics(intrinsics);

@@ -17,7 +17,7 @@ struct PipelineConfig {
   int max_frames_in_flight = 4;  // replay back-pressure: frames between source and sink
   // Live sources: frames in the pipeline at once. The device does not wait: while this many
   // are in flight its newer frames queue (OpenNi2Options::queue_frames) and the oldest drop.
-  int live_frames_in_flight = 3;
+  int live_frames_in_flight = 2;
 };
 
 void readConfig(const core::ConfigSection& section, PipelineConfig& config);

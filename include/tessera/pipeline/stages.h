@@ -207,6 +207,7 @@ struct Progress {
   std::optional<std::size_t> frames_total;
   double elapsed_s = 0.0;
   std::size_t map_bytes = 0;
+  std::optional<double> latency_ms;  // live sources: the last frame's capture-to-fusion time
 };
 
 // Writes one stats.jsonl line per frame and the poses frames were fused at (trajectory.txt,

@@ -1,0 +1,86 @@
+#include "freenect_inbox.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cstring>
+
+#include "tessera/drivers/freenect/kinect_v1.h"
+
+namespace tessera::drivers::freenect {
+
+namespace {
+
+constexpr int kWidth = 640;
+constexpr int kHeight = 480;
+
+FrameInbox& inboxOf(freenect_device* device) {
+  return *static_cast<FrameInbox*>(freenect_get_user(device));
+}
+
+// libfreenect's buffers need not be aligned for uint16 (fakenect's follow a PGM header), so
+// frames are copied bytewise before they are read as pixels.
+cv::Mat copyImage(const void* data, int type, std::size_t bytes) {
+  cv::Mat image(kHeight, kWidth, type);
+  if (bytes < image.total() * image.elemSize()) image.setTo(0);
+  std::memcpy(image.data, data, std::min(bytes, image.total() * image.elemSize()));
+  return image;
+}
+
+}  // namespace
+
+std::int64_t steadyNowNs() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(
+             std::chrono::steady_clock::now().time_since_epoch())
+      .count();
+}
+
+std::int64_t DeviceClock::unwrap(std::uint32_t stamp) {
+  if (!started_) {
+    started_ = true;
+    last_ticks_ = stamp;
+  } else {
+    // Modular difference, read as signed: the nearest placement of the new stamp.
+    last_ticks_ += static_cast<std::int32_t>(stamp - last_stamp_);
+  }
+  last_stamp_ = stamp;
+  return last_ticks_;
+}
+
+void FrameInbox::clear() {
+  depth.clear();
+  colour.clear();
+  clock = DeviceClock();
+  lost = false;
+  loss_code = 0;
+}
+
+void onDepth(freenect_device* device, void* data, std::uint32_t timestamp) {
+  FrameInbox& inbox = inboxOf(device);
+  CapturedFrame frame;
+  frame.arrival_ns = steadyNowNs();
+  cv::Mat image = copyImage(data, CV_16UC1, inbox.depth_bytes);
+  frame.image = inbox.depth_in_mm ? image : disparityImageToMm(image);
+  std::lock_guard lock(inbox.mutex);
+  frame.ticks = inbox.clock.unwrap(timestamp);
+  ++inbox.delivered;
+  inbox.depth.push_back(std::move(frame));
+  while (inbox.depth.size() > inbox.depth_capacity) {
+    inbox.depth.pop_front();
+    ++inbox.dropped;
+  }
+  inbox.changed.notify_all();
+}
+
+void onColour(freenect_device* device, void* data, std::uint32_t timestamp) {
+  FrameInbox& inbox = inboxOf(device);
+  CapturedFrame frame;
+  frame.arrival_ns = steadyNowNs();
+  frame.image = copyImage(data, CV_8UC3, inbox.colour_bytes);
+  std::lock_guard lock(inbox.mutex);
+  frame.ticks = inbox.clock.unwrap(timestamp);
+  inbox.colour.push_back(std::move(frame));
+  while (inbox.colour.size() > inbox.colour_capacity) inbox.colour.pop_front();
+  inbox.changed.notify_all();
+}
+
+}  // namespace tessera::drivers::freenect
