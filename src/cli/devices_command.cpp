@@ -19,6 +19,9 @@ CLI::App* addDevicesCommand(CLI::App& app) {
 
 int devicesCommand() {
   try {
+    const auto kinects = drivers::freenect::listFreenectDevices();
+    for (const std::string& line : kinects) fmt::print("{}\n", line);
+    if (kinects.empty()) fmt::print("no Kinect v1 found by libfreenect\n");
     const auto devices = drivers::openni2::listDevices();
     if (devices.empty()) {
       fmt::print(

@@ -152,6 +152,12 @@ int recordCommand(const RecordArguments& args) {
   try {
     if (drivers::openni2::parseOpenNi2Uri(args.source)) return recordLive(args);
     auto source = openSource(args.source, args.source_args);
+    if (source->isLive()) {
+      throw core::ConfigError(fmt::format(
+          "{}: only OpenNI2 devices (openni2://) can be recorded, through OpenNI2's Recorder; "
+          "open a Kinect v1 through OpenNI2 to record it",
+          args.source));
+    }
     return recordFrames(*source, args, nlohmann::json::object());
   } catch (const core::Error& e) {
     spdlog::error("{}", e.what());

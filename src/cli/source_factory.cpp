@@ -5,6 +5,7 @@
 
 #include <fmt/format.h>
 
+#include "stop_request.h"
 #include "tessera/core/error.h"
 #include "tessera/drivers/dataset_source.h"
 #include "tessera/drivers/freenect/freenect_source.h"
@@ -73,6 +74,7 @@ std::unique_ptr<core::FrameSource> openSource(const std::string& spec,
     options.reconnect_timeout_s = args.reconnect_timeout_s;
     options.frame_timeout_ms = args.frame_timeout_ms;
     options.record_path = args.record_path;
+    options.stop = &stopOnInterrupt();
     if (!args.calibration.empty()) {
       const auto calibration = drivers::v4l2::loadCameraCalibration(args.calibration);
       options.colour_camera = calibration.colour;

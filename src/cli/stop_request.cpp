@@ -1,6 +1,6 @@
 #include "stop_request.h"
 
-#include <csignal>
+#include <signal.h>
 #include <mutex>
 
 #include <unistd.h>
@@ -11,6 +11,9 @@ namespace {
 
 std::atomic<bool> g_stop{false};
 
+// Only a lock-free atomic may be touched from a signal handler.
+static_assert(std::atomic<bool>::is_always_lock_free);
+
 extern "C" void requestStop(int /*signal*/) {
   if (g_stop.exchange(true)) _exit(130);  // the second request: stop now
 }
@@ -20,8 +23,12 @@ extern "C" void requestStop(int /*signal*/) {
 const std::atomic<bool>& stopOnInterrupt() {
   static std::once_flag once;
   std::call_once(once, [] {
-    std::signal(SIGINT, requestStop);
-    std::signal(SIGTERM, requestStop);
+    struct sigaction action {};
+    action.sa_handler = requestStop;
+    sigemptyset(&action.sa_mask);
+    action.sa_flags = SA_RESTART;  // a read interrupted by the signal goes on
+    sigaction(SIGINT, &action, nullptr);
+    sigaction(SIGTERM, &action, nullptr);
   });
   return g_stop;
 }

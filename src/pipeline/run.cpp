@@ -86,7 +86,7 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
   summary.tracking_restarts = tracking_stage.trackingRestarts();
   summary.source_end_problem = source_stage.endProblem();
   summary.live = source.isLive();
-  summary.live_stats = source.liveStats();
+  summary.live_stats = source_stage.liveStatsAtEnd();
   summary.source_interruptions = sink.interruptions();
   summary.latency_ms_p50 = percentile(sink.latenciesMs(), 0.50);
   summary.latency_ms_p95 = percentile(sink.latenciesMs(), 0.95);
@@ -180,25 +180,11 @@ void writeReport(const RunSummary& summary, const std::filesystem::path& path) {
   report["source_end_problem"] =
       summary.source_end_problem.empty() ? json(nullptr) : json(summary.source_end_problem);
   // Figures of stages that do not exist yet: null, never a made-up value.
-  for (const char* key : {"textures_stored",
-                          "patterns_stored",
-                          "reuses",
-                          "reuse_rate",
-                          "bytes_before",
-                          "bytes_after",
-                          "compression",
-                          "patch_psnr_mean",
-                          "patch_psnr_p5",
-                          "patch_psnr_min",
-                          "ccv_rejection",
-                          "commit_latency_ms_p50",
-                          "commit_latency_ms_p95",
-                          "plane_recall",
-                          "plane_precision",
-                          "false_match_rate",
-                          "missed_match_rate",
-                          "economy",
-                          "gt_psnr_mean"}) {
+  for (const char* key :
+       {"textures_stored", "patterns_stored", "reuses", "reuse_rate", "bytes_before", "bytes_after",
+        "compression", "patch_psnr_mean", "patch_psnr_p5", "patch_psnr_min", "ccv_rejection",
+        "commit_latency_ms_p50", "commit_latency_ms_p95", "plane_recall", "plane_precision",
+        "false_match_rate", "missed_match_rate", "economy", "gt_psnr_mean"}) {
     report[key] = nullptr;
   }
   json stages = json::object();

@@ -6,6 +6,7 @@
 #include <spdlog/spdlog.h>
 #include <nlohmann/json.hpp>
 
+#include "tessera/core/clock.h"
 #include "tessera/core/error.h"
 #include "tessera/core/registration.h"
 #include "tessera/eval/trajectory.h"
@@ -17,6 +18,12 @@ SourceStage::SourceStage(core::FrameSource& source, std::optional<std::size_t> m
     : source_(source), max_frames_(max_frames), stop_(stop) {}
 
 std::optional<core::Frame> SourceStage::next() {
+  std::optional<core::Frame> frame = read();
+  if (!frame) live_stats_at_end_ = source_.liveStats();
+  return frame;
+}
+
+std::optional<core::Frame> SourceStage::read() {
   while (!max_frames_ || frames_read_ < *max_frames_) {
     if (stop_ != nullptr && stop_->load()) {
       spdlog::info("{}: stopped on request after {} frames", source_.name(), frames_read_);
@@ -133,11 +140,8 @@ FusedFrame IntegrationStage::process(TrackedFrame tracked) {
     }
   }
   fused.integration_ms = timer_.lastMs();
-  if (tracked.frame.arrival_ns > 0) {
-    const auto now_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(
-                            std::chrono::steady_clock::now().time_since_epoch())
-                            .count();
-    fused.latency_ms = static_cast<double>(now_ns - tracked.frame.arrival_ns) / 1e6;
+  if (fused.integrated && tracked.frame.arrival_ns > 0) {
+    fused.latency_ms = static_cast<double>(core::steadyNowNs() - tracked.frame.arrival_ns) / 1e6;
   }
   (fused.integrated ? integrated_ : skipped_)++;
   fused.tsdf_bytes = map_.memoryBytes();

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include "support/synthetic_plane.h"
+#include "support/test_data.h"
 #include "tessera/core/error.h"
 #include "tessera/fusion/tsdf_map.h"
 
@@ -128,8 +129,7 @@ TEST(TsdfMap, AllInvalidDepthAddsNothing) {
 // A run that fused nothing (a live device lost before its first frame) still writes a valid,
 // empty mesh file rather than failing at export.
 TEST(TsdfMap, AnEmptyMeshIsWrittenAsAValidEmptyPly) {
-  const auto path = std::filesystem::temp_directory_path() / "tessera_empty_mesh.ply";
-  std::filesystem::remove(path);
+  const auto path = tessera::test::freshTempDir() / "empty.ply";
   tessera::fusion::writePly(tessera::fusion::SurfaceMesh{}, path);
   std::ifstream in(path);
   const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());

@@ -1,5 +1,7 @@
 #include "freenect_inbox.h"
 
+#include "tessera/core/clock.h"
+
 #include <algorithm>
 #include <chrono>
 #include <cstring>
@@ -28,12 +30,6 @@ cv::Mat copyImage(const void* data, int type, std::size_t bytes) {
 
 }  // namespace
 
-std::int64_t steadyNowNs() {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(
-             std::chrono::steady_clock::now().time_since_epoch())
-      .count();
-}
-
 std::int64_t DeviceClock::unwrap(std::uint32_t stamp) {
   if (!started_) {
     started_ = true;
@@ -54,10 +50,26 @@ void FrameInbox::clear() {
   loss_code = 0;
 }
 
-void onDepth(freenect_device* device, void* data, std::uint32_t timestamp) {
-  FrameInbox& inbox = inboxOf(device);
+namespace {
+
+// libfreenect calls back from inside libusb: nothing may escape (std::terminate), so a frame
+// that cannot be copied is counted as dropped.
+template <typename Take>
+void guarded(FrameInbox& inbox, bool is_depth, Take take) {
+  try {
+    take();
+  } catch (const std::exception&) {
+    std::lock_guard lock(inbox.mutex);
+    if (is_depth) {
+      ++inbox.delivered;
+      ++inbox.dropped;
+    }
+  }
+}
+
+void takeDepth(FrameInbox& inbox, void* data, std::uint32_t timestamp) {
   CapturedFrame frame;
-  frame.arrival_ns = steadyNowNs();
+  frame.arrival_ns = core::steadyNowNs();
   cv::Mat image = copyImage(data, CV_16UC1, inbox.depth_bytes);
   frame.image = inbox.depth_in_mm ? image : disparityImageToMm(image);
   std::lock_guard lock(inbox.mutex);
@@ -71,16 +83,27 @@ void onDepth(freenect_device* device, void* data, std::uint32_t timestamp) {
   inbox.changed.notify_all();
 }
 
-void onColour(freenect_device* device, void* data, std::uint32_t timestamp) {
-  FrameInbox& inbox = inboxOf(device);
+void takeColour(FrameInbox& inbox, void* data, std::uint32_t timestamp) {
   CapturedFrame frame;
-  frame.arrival_ns = steadyNowNs();
+  frame.arrival_ns = core::steadyNowNs();
   frame.image = copyImage(data, CV_8UC3, inbox.colour_bytes);
   std::lock_guard lock(inbox.mutex);
   frame.ticks = inbox.clock.unwrap(timestamp);
   inbox.colour.push_back(std::move(frame));
   while (inbox.colour.size() > inbox.colour_capacity) inbox.colour.pop_front();
   inbox.changed.notify_all();
+}
+
+}  // namespace
+
+void onDepth(freenect_device* device, void* data, std::uint32_t timestamp) {
+  FrameInbox& inbox = inboxOf(device);
+  guarded(inbox, true, [&] { takeDepth(inbox, data, timestamp); });
+}
+
+void onColour(freenect_device* device, void* data, std::uint32_t timestamp) {
+  FrameInbox& inbox = inboxOf(device);
+  guarded(inbox, false, [&] { takeColour(inbox, data, timestamp); });
 }
 
 }  // namespace tessera::drivers::freenect

@@ -18,9 +18,6 @@ struct CapturedFrame {
   cv::Mat image;                // depth CV_16UC1 millimetres, or colour CV_8UC3 RGB
 };
 
-// Steady-clock nanoseconds, the clock of CapturedFrame::arrival_ns and Frame::arrival_ns.
-std::int64_t steadyNowNs();
-
 // Extends the device's 32-bit timestamps to 64 bits across wrap-arounds. Depth and colour
 // share one clock and may arrive slightly out of order, so each stamp is placed nearest the
 // previous one (a step of less than 2^31 ticks either way).

@@ -1,26 +1,35 @@
 #include "frame_inbox.h"
 
-#include <chrono>
+#include "tessera/core/clock.h"
 
 namespace tessera::drivers::openni2 {
-
-std::int64_t steadyNowNs() {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(
-             std::chrono::steady_clock::now().time_since_epoch())
-      .count();
-}
 
 void FrameInbox::clear() {
   depth.clear();
   colour.clear();
   lost = false;
+  last_depth_index.reset();
 }
 
 void InboxListener::onNewFrame(openni::VideoStream& stream) {
+  // Called on OpenNI2's thread: nothing may escape it (std::terminate), so a frame that cannot
+  // be copied is counted as dropped.
+  try {
+    take(stream);
+  } catch (const std::exception&) {
+    std::lock_guard lock(inbox_.mutex);
+    if (is_depth_) {
+      ++inbox_.delivered;
+      ++inbox_.dropped;
+    }
+  }
+}
+
+void InboxListener::take(openni::VideoStream& stream) {
   openni::VideoFrameRef ref;
   if (stream.readFrame(&ref) != openni::STATUS_OK || !ref.isValid()) return;
   CapturedFrame frame;
-  frame.arrival_ns = steadyNowNs();
+  frame.arrival_ns = core::steadyNowNs();
   frame.timestamp_us = static_cast<std::int64_t>(ref.getTimestamp());
   frame.device_index = ref.getFrameIndex();
   const int format = ref.getVideoMode().getPixelFormat();
@@ -34,7 +43,14 @@ void InboxListener::onNewFrame(openni::VideoStream& stream) {
   }
   std::lock_guard lock(inbox_.mutex);
   if (is_depth_) {
-    ++inbox_.delivered;
+    // OpenNI2 keeps only the newest frame for a listener that is still busy: gaps in its frame
+    // numbers are frames the device sent that never reached us.
+    const int missed = inbox_.last_depth_index && frame.device_index > *inbox_.last_depth_index
+                           ? frame.device_index - *inbox_.last_depth_index - 1
+                           : 0;
+    inbox_.last_depth_index = frame.device_index;
+    inbox_.delivered += static_cast<std::size_t>(missed) + 1;
+    inbox_.dropped += static_cast<std::size_t>(missed);
     inbox_.depth.push_back(std::move(frame));
     while (inbox_.depth.size() > inbox_.depth_capacity) {
       inbox_.depth.pop_front();

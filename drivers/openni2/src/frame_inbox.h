@@ -4,6 +4,7 @@
 #include <cstdint>
 #include <deque>
 #include <mutex>
+#include <optional>
 #include <string>
 
 #include <OpenNI.h>
@@ -13,13 +14,10 @@ namespace tessera::drivers::openni2 {
 
 struct CapturedFrame {
   std::int64_t timestamp_us = 0;  // device clock
-  std::int64_t arrival_ns = 0;    // host steady clock
+  std::int64_t arrival_ns = 0;    // host steady clock (core::steadyNowNs)
   int device_index = 0;           // OpenNI2's frame number
   cv::Mat image;                  // depth CV_16UC1 millimetres, or colour CV_8UC3 RGB
 };
-
-// Steady-clock nanoseconds, the clock of CapturedFrame::arrival_ns and Frame::arrival_ns.
-std::int64_t steadyNowNs();
 
 // Shared by OpenNI2's callback threads (writers) and the source's reader; every field is
 // guarded by `mutex`.
@@ -32,7 +30,8 @@ struct FrameInbox {
   std::size_t colour_capacity = 8;  // enough to pair with any depth frame still held
   std::size_t delivered = 0;
   std::size_t dropped = 0;
-  bool lost = false;  // the device was unplugged
+  bool lost = false;                    // the device was unplugged
+  std::optional<int> last_depth_index;  // this connection's last depth frame number
 
   void clear();
 };
@@ -44,6 +43,8 @@ class InboxListener : public openni::VideoStream::NewFrameListener {
   void onNewFrame(openni::VideoStream& stream) override;
 
  private:
+  void take(openni::VideoStream& stream);
+
   FrameInbox& inbox_;
   bool is_depth_;
 };

@@ -126,7 +126,11 @@ struct OpenNi2Source::State {
   std::uint64_t frames_out = 0;
   int segment = 0;
   bool ended = false;
-  bool interrupted = false;
+  bool session_start_pending = true;   // the next frame is a (re)connection's first
+  std::int64_t session_offset_us = 0;  // added to this session's device timestamps
+  std::optional<std::int64_t> last_timestamp_us;
+
+  bool stopRequested() const { return options.stop != nullptr && options.stop->load(); }
 };
 
 void OpenNi2Source::State::connect() {
@@ -189,7 +193,15 @@ void OpenNi2Source::State::connect() {
   c->depth.addNewFrameListener(c->depth_listener.get());
   c->colour.addNewFrameListener(c->colour_listener.get());
   connection = std::move(c);
-  if (!options.record_path.empty()) startRecording();
+  session_start_pending = true;
+  if (!options.record_path.empty()) {
+    try {
+      startRecording();
+    } catch (...) {
+      connection.reset();  // no half-set-up device: the next attempt starts clean
+      throw;
+    }
+  }
   if (connection->depth.start() != openni::STATUS_OK ||
       connection->colour.start() != openni::STATUS_OK) {
     connection.reset();
@@ -235,21 +247,29 @@ void OpenNi2Source::State::startRecording() {
 bool OpenNi2Source::State::reconnect() {
   const std::string label = deviceLabel(uri);
   const auto start = std::chrono::steady_clock::now();
-  const auto deadline = start + std::chrono::duration<double>(options.reconnect_timeout_s);
+  const auto deadline = start + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                                    std::chrono::duration<double>(options.reconnect_timeout_s));
   auto pause = std::chrono::duration<double>(0.1);
   spdlog::warn("{}: waiting up to {:.0f} s for the device to come back", label,
                options.reconnect_timeout_s);
-  while (std::chrono::steady_clock::now() < deadline) {
-    std::this_thread::sleep_for(std::min(
-        pause, std::chrono::duration<double>(deadline - std::chrono::steady_clock::now())));
+  while (std::chrono::steady_clock::now() < deadline && !stopRequested()) {
+    // Sleep in short steps so that Ctrl-C is not kept waiting by the backoff.
+    const auto wake = std::min<std::chrono::steady_clock::time_point>(
+        std::chrono::steady_clock::now() +
+            std::chrono::duration_cast<std::chrono::steady_clock::duration>(pause),
+        deadline);
+    while (std::chrono::steady_clock::now() < wake && !stopRequested()) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    }
     pause = std::min(pause * 2.0, std::chrono::duration<double>(2.0));
+    if (stopRequested()) break;
     try {
       connect();
       ++stats.reconnects;
       spdlog::info("{}: the device is back after {:.1f} s", label,
                    std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
       return true;
-    } catch (const core::SourceError& e) {
+    } catch (const core::Error& e) {  // SourceError, or a recording sidecar that cannot be written
       spdlog::debug("{}", e.what());
     }
   }
@@ -261,8 +281,14 @@ core::ReadResult OpenNi2Source::State::nextFrame() {
   const auto period_us = static_cast<std::int64_t>(1e6 / std::max(1, options.depth_mode.fps));
   const std::int64_t tolerance_us = period_us / 2;
   std::unique_lock lock(inbox.mutex);
-  inbox.changed.wait_for(lock, std::chrono::milliseconds(options.frame_timeout_ms),
-                         [&] { return !inbox.depth.empty() || inbox.lost; });
+  const auto give_up =
+      std::chrono::steady_clock::now() + std::chrono::milliseconds(options.frame_timeout_ms);
+  // Waits in short steps so that Ctrl-C ends a run whose device has gone quiet.
+  while (!inbox.changed.wait_for(lock, std::chrono::milliseconds(100), [&] {
+    return !inbox.depth.empty() || inbox.lost;
+  }) && std::chrono::steady_clock::now() < give_up) {
+    if (stopRequested()) return result;  // end of data, no problem: the user stopped the run
+  }
   if (inbox.depth.empty()) {
     result.status = core::ReadStatus::kInterrupted;
     result.problem = inbox.lost ? fmt::format("{}: the device was unplugged", deviceLabel(uri))
@@ -295,7 +321,14 @@ core::ReadResult OpenNi2Source::State::nextFrame() {
   inbox.colour.erase(inbox.colour.begin(), std::next(nearest));
   lock.unlock();
   frame.index = frames_out++;
-  frame.timestamp_ns = depth.timestamp_us * 1000;
+  // A reconnected device may restart its clock: later sessions continue after the last
+  // timestamp, so that the trajectory and the stats stay in order.
+  if (session_start_pending) {
+    session_offset_us = last_timestamp_us ? *last_timestamp_us + period_us - depth.timestamp_us : 0;
+    session_start_pending = false;
+  }
+  last_timestamp_us = depth.timestamp_us + session_offset_us;
+  frame.timestamp_ns = *last_timestamp_us * 1000;
   frame.arrival_ns = depth.arrival_ns;
   frame.depth_mm = std::move(depth.image);
   frame.intrinsics = intrinsics;

@@ -7,6 +7,7 @@
 #include <spdlog/spdlog.h>
 #include <opencv2/core.hpp>
 
+#include "tessera/core/clock.h"
 #include "tessera/core/error.h"
 #include "tessera/drivers/v4l2/pixel_conversion.h"
 
@@ -176,9 +177,7 @@ core::ReadResult V4l2Source::read() {
     depth = depth_->next(options_.stall_timeout_ms);
   } while (depth.status == CaptureStatus::kTimeout);
   if (depth.status == CaptureStatus::kEnd) return endOfData(std::move(depth.problem));
-  const std::int64_t arrival_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(
-                                      std::chrono::steady_clock::now().time_since_epoch())
-                                      .count();
+  const std::int64_t arrival_ns = core::steadyNowNs();
   const std::uint32_t skipped = last_depth_sequence_ && depth.sequence > *last_depth_sequence_
                                     ? depth.sequence - *last_depth_sequence_ - 1
                                     : 0;

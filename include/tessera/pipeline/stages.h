@@ -41,15 +41,20 @@ class SourceStage {
   std::size_t badFrames() const { return bad_frames_; }
   // Set when the source ended abnormally (truncated recording, lost device).
   const std::string& endProblem() const { return end_problem_; }
+  // The live source's counts when its stream ended (a device keeps sending after that).
+  const core::LiveStats& liveStatsAtEnd() const { return live_stats_at_end_; }
   const StageTimer& timer() const { return timer_; }
 
  private:
+  std::optional<core::Frame> read();
+
   core::FrameSource& source_;
   std::optional<std::size_t> max_frames_;
   const std::atomic<bool>* stop_;
   std::size_t frames_read_ = 0;
   std::size_t bad_frames_ = 0;
   std::string end_problem_;
+  core::LiveStats live_stats_at_end_;
   StageTimer timer_;
 };
 

@@ -1,6 +1,7 @@
 #pragma once
 // Live frames from an OpenNI2 device (Kinect v1, Xtion, Carmine, or any device an OpenNI2
 // driver presents). URIs: `openni2://` opens the first device, `openni2://URI` that device.
+#include <atomic>
 #include <filesystem>
 #include <memory>
 #include <optional>
@@ -35,6 +36,8 @@ struct OpenNi2Options {
   // Records what the device sends through OpenNI2's own Recorder (lossless), with an
   // OUT.gt.json sidecar holding the intrinsics. After a reconnect: OUT-2.oni, OUT-3.oni...
   std::filesystem::path record_path;
+  // Set (e.g. by Ctrl-C) to end the stream: waits for frames or for a lost device end early.
+  const std::atomic<bool>* stop = nullptr;
 };
 
 // The URI inside "openni2://URI" (empty for the first device); nothing for other sources.
