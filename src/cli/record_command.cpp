@@ -121,8 +121,8 @@ int recordLive(const RecordArguments& args) {
     progress.update({frames, std::nullopt, elapsed, 0, std::nullopt});
   }
   progress.finish();
+  source->stopStreaming();  // closes the recording
   const core::LiveStats live = source->liveStats();
-  source.reset();  // closes the recording
   if (!end_problem.empty()) spdlog::warn("{}", end_problem);
   spdlog::info(
       "{} frames sent by the device, all recorded to {}{}", live.frames_delivered, args.output,

@@ -19,7 +19,10 @@ SourceStage::SourceStage(core::FrameSource& source, std::optional<std::size_t> m
 
 std::optional<core::Frame> SourceStage::next() {
   std::optional<core::Frame> frame = read();
-  if (!frame) live_stats_at_end_ = source_.liveStats();
+  if (!frame) {
+    source_.stopStreaming();
+    live_stats_at_end_ = source_.liveStats();
+  }
   return frame;
 }
 

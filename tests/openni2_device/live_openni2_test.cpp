@@ -3,6 +3,7 @@
 // CMakeLists.txt) because the driver reads its settings when OpenNI2 starts, once per process.
 #include <cmath>
 #include <fstream>
+#include <thread>
 
 #include <fmt/format.h>
 #include <gtest/gtest.h>
@@ -181,6 +182,34 @@ TEST(LiveOpenNi2, ABusyPipelineDropsFramesAndCountsThem) {
   // The device left for good at its last frame: the run ended cleanly with the map exported.
   EXPECT_NE(summary.source_end_problem.find("did not come back"), std::string::npos);
   EXPECT_TRUE(fs::exists(out / "patches.obj"));
+}
+
+// A run stopped early (--max-frames, as Ctrl-C does) stops the device: the counts are final,
+// with the frames still queued counted as dropped, and the recording ends there too.
+TEST(LiveOpenNi2, StoppingEarlyStopsTheDeviceAndItsRecording) {
+  requireTestDevice();
+  const fs::path dir = test::freshTempDir();
+  OpenNi2Options options;
+  options.record_path = dir / "live.oni";
+  pipeline::RunSummary summary;
+  {
+    OpenNi2Source source(options);
+    pipeline::RunOptions run;
+    run.out_dir = dir / "out";
+    run.max_frames = 5;
+    summary = pipeline::runPipeline(source, pipeline::loadRunConfig(std::nullopt), run);
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));  // the device would go on
+    EXPECT_EQ(source.liveStats().frames_delivered, summary.live_stats.frames_delivered);
+  }
+  EXPECT_EQ(summary.frames, 5u);
+  EXPECT_EQ(summary.frames + summary.frames_bad + summary.live_stats.frames_dropped,
+            summary.live_stats.frames_delivered);
+  EXPECT_LT(summary.live_stats.frames_delivered,
+            static_cast<std::size_t>(envInt("TESSERA_TEST_DEVICE_FRAMES")));
+  drivers::oni::OniSource recording(dir / "live.oni");
+  ASSERT_TRUE(recording.frameCount());
+  EXPECT_GE(*recording.frameCount() + 1, summary.live_stats.frames_delivered);
+  EXPECT_LE(*recording.frameCount(), summary.live_stats.frames_delivered);
 }
 
 // A run that records the device through OpenNI2's Recorder: replaying the recording builds the

@@ -74,6 +74,13 @@ class FreenectSource : public core::FrameSource {
     connect();
   }
   ~FreenectSource() override { connection_.reset(); }
+  void stopStreaming() override {
+    connection_.reset();
+    ended_ = true;
+    std::lock_guard lock(inbox_.mutex);
+    inbox_.dropped += inbox_.depth.size();  // never to be read
+    inbox_.depth.clear();
+  }
 
   core::ReadResult read() override;
   std::string name() const override { return name_; }

@@ -366,6 +366,15 @@ core::LiveStats OpenNi2Source::liveStats() const {
   return stats;
 }
 
+void OpenNi2Source::stopStreaming() {
+  State& s = *state_;
+  s.connection.reset();  // streams stop, the recording closes
+  s.ended = true;
+  std::lock_guard lock(s.inbox.mutex);
+  s.inbox.dropped += s.inbox.depth.size();  // never to be read
+  s.inbox.depth.clear();
+}
+
 core::ReadResult OpenNi2Source::read() {
   State& s = *state_;
   if (s.ended) return {};

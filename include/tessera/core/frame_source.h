@@ -45,6 +45,9 @@ class FrameSource {
   // (it drops frames instead of queueing them). Recordings wait for the reader.
   virtual bool isLive() const { return false; }
   virtual LiveStats liveStats() const { return {}; }
+  // The reader is done (end of stream, --max-frames, Ctrl-C): a live device stops sending, its
+  // recording closes, and frames still queued count as dropped. read() then ends the stream.
+  virtual void stopStreaming() {}
 };
 
 }  // namespace tessera::core

@@ -59,6 +59,7 @@ class OpenNi2Source : public core::FrameSource {
   std::string name() const override;
   bool isLive() const override { return true; }
   core::LiveStats liveStats() const override;
+  void stopStreaming() override;
 
   const core::Intrinsics& intrinsics() const;
   bool hardwareRegistration() const;
