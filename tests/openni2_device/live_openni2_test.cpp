@@ -62,6 +62,21 @@ pipeline::RunSummary runInto(core::FrameSource& source, const fs::path& out_dir)
   return pipeline::runPipeline(source, pipeline::loadRunConfig(std::nullopt), options);
 }
 
+TEST(OpenNi2Arguments, VideoModesAndUrisParseOrNameWhatIsWrong) {
+  const auto mode = drivers::openni2::parseVideoMode("1280x1024@15");
+  EXPECT_EQ(mode.width, 1280);
+  EXPECT_EQ(mode.height, 1024);
+  EXPECT_EQ(mode.fps, 15);
+  for (const char* bad : {"640x480", "640x480@", "640*480@30", "640x480@30fps", "-640x480@30",
+                          "640x0@30", " 640x480@30", "x480@30", ""}) {
+    EXPECT_THROW(drivers::openni2::parseVideoMode(bad), core::ConfigError) << bad;
+  }
+  EXPECT_EQ(drivers::openni2::parseOpenNi2Uri("openni2://"), std::optional<std::string>(""));
+  EXPECT_EQ(drivers::openni2::parseOpenNi2Uri("openni2://1d27/0601@2/5"),
+            std::optional<std::string>("1d27/0601@2/5"));
+  EXPECT_FALSE(drivers::openni2::parseOpenNi2Uri("recording.oni"));
+}
+
 TEST(LiveOpenNi2, ListsTheDeviceWithItsModes) {
   requireTestDevice();
   const auto devices = drivers::openni2::listDevices();
