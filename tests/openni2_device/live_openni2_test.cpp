@@ -303,8 +303,13 @@ TEST(LiveOpenNi2, AnUnpluggedDeviceIsWaitedForAndResumes) {
   std::ifstream stats(dir / "out" / "stats.jsonl");
   std::string line;
   bool interrupted = false, finalized_then = false;
+  std::int64_t last_timestamp_ns = -1;
   while (std::getline(stats, line)) {
     const auto json = nlohmann::json::parse(line);
+    if (json["type"] == "frame") {  // in order across the reconnect
+      EXPECT_GT(json["timestamp_ns"].get<std::int64_t>(), last_timestamp_ns);
+      last_timestamp_ns = json["timestamp_ns"].get<std::int64_t>();
+    }
     if (json["type"] == "source") interrupted = true;
     if (interrupted && json["type"] == "patch" && json["event"] == "finalized")
       finalized_then = true;

@@ -134,8 +134,9 @@ struct OpenNi2Source::State {
   std::uint64_t frames_out = 0;
   int segment = 0;
   bool ended = false;
-  bool session_start_pending = true;   // the next frame is a (re)connection's first
-  std::int64_t session_offset_us = 0;  // added to this session's device timestamps
+  bool session_start_pending = true;  // the next frame is a (re)connection's first
+  // Added to the device's timestamps; moved on when a reconnected device restarts its clock.
+  std::int64_t session_offset_us = 0;
   std::optional<std::int64_t> last_timestamp_us;
 
   bool stopRequested() const { return options.stop != nullptr && options.stop->load(); }
@@ -182,10 +183,13 @@ void OpenNi2Source::State::connect() {
 
   if (options.intrinsics) {
     intrinsics = *options.intrinsics;
-  } else {
+  } else if (const double hfov = c->depth.getHorizontalFieldOfView(),
+             vfov = c->depth.getVerticalFieldOfView();
+             hfov > 0.0 && vfov > 0.0) {
     intrinsics = oni::intrinsicsFromFov(depth_mode.getResolutionX(), depth_mode.getResolutionY(),
-                                        c->depth.getHorizontalFieldOfView(),
-                                        c->depth.getVerticalFieldOfView());
+                                        hfov, vfov);
+  } else {
+    intrinsics = {};
   }
   if (!intrinsics.valid()) {
     throw core::SourceError(
@@ -331,10 +335,11 @@ core::ReadResult OpenNi2Source::State::nextFrame() {
   frame.index = frames_out++;
   // A reconnected device may restart its clock: later sessions continue after the last
   // timestamp, so that the trajectory and the stats stay in order.
-  if (session_start_pending) {
-    session_offset_us = last_timestamp_us ? *last_timestamp_us + period_us - depth.timestamp_us : 0;
-    session_start_pending = false;
+  if (session_start_pending && last_timestamp_us &&
+      depth.timestamp_us + session_offset_us <= *last_timestamp_us) {
+    session_offset_us = *last_timestamp_us + period_us - depth.timestamp_us;
   }
+  session_start_pending = false;
   last_timestamp_us = depth.timestamp_us + session_offset_us;
   frame.timestamp_ns = *last_timestamp_us * 1000;
   frame.arrival_ns = depth.arrival_ns;
