@@ -1,4 +1,5 @@
 #include <algorithm>
+#include <cmath>
 #include <fstream>
 
 #include <gtest/gtest.h>
@@ -227,20 +228,44 @@ TEST(DatasetSource, ReadsRedwoodWithJsonIntrinsicsAndLogTrajectory) {
   EXPECT_LT(median, 5000.0);
 }
 
-TEST(DatasetSource, ReadsSevenScenesFolder) {
-  const fs::path dir = test::freshTempDir() / "seq-01";
+// Writes a 7-Scenes sequence folder with one frame per colour image (640x480 BGR): PNG colour,
+// depth 1500 + 100 i mm with a 65535 corner, pose x = 0.1 i m, and a camera-intrinsics.txt.
+void writeSevenScenesSequence(const fs::path& dir, const std::vector<cv::Mat>& colours) {
   fs::create_directories(dir);
-  for (int i = 0; i < 3; ++i) {
-    const std::string stem = cv::format("frame-%06d", i);
-    cv::Mat depth(480, 640, CV_16UC1, cv::Scalar(1500 + 100 * i));
+  for (std::size_t i = 0; i < colours.size(); ++i) {
+    const std::string stem = cv::format("frame-%06zu", i);
+    cv::Mat depth(480, 640, CV_16UC1, cv::Scalar(1500 + 100 * static_cast<double>(i)));
     depth(cv::Rect(0, 0, 10, 10)).setTo(65535);  // 7-Scenes' invalid marker
     cv::imwrite((dir / (stem + ".depth.png")).string(), depth);
-    cv::imwrite((dir / (stem + ".color.png")).string(),
-                cv::Mat(480, 640, CV_8UC3, cv::Scalar(10, 20, 30)));
+    cv::imwrite((dir / (stem + ".color.png")).string(), colours[i]);
     std::ofstream(dir / (stem + ".pose.txt"))
-        << "1 0 0 " << 0.1 * i << "\n0 1 0 0\n0 0 1 0\n0 0 0 1\n";
+        << "1 0 0 " << 0.1 * static_cast<double>(i) << "\n0 1 0 0\n0 0 1 0\n0 0 0 1\n";
   }
   std::ofstream(dir / "camera-intrinsics.txt") << "585 0 320\n0 585 240\n0 0 1\n";
+}
+
+// Copies a 7-Scenes folder, re-encoding each frame-N.color.png as frame-N.color.jpg
+// (quality 95), the way several public copies of the dataset ship.
+void copySevenScenesAsJpeg(const fs::path& from, const fs::path& to) {
+  fs::create_directories(to);
+  const std::string png_suffix = ".color.png";
+  for (const auto& entry : fs::directory_iterator(from)) {
+    const std::string name = entry.path().filename().string();
+    if (!name.ends_with(png_suffix)) {
+      fs::copy_file(entry.path(), to / name);
+      continue;
+    }
+    const std::string jpg_name = name.substr(0, name.size() - png_suffix.size()) + ".color.jpg";
+    ASSERT_TRUE(cv::imwrite((to / jpg_name).string(), cv::imread(entry.path().string()),
+                            {cv::IMWRITE_JPEG_QUALITY, 95}))
+        << jpg_name;
+  }
+}
+
+TEST(DatasetSource, ReadsSevenScenesFolder) {
+  const fs::path dir = test::freshTempDir() / "seq-01";
+  writeSevenScenesSequence(
+      dir, std::vector<cv::Mat>(3, cv::Mat(480, 640, CV_8UC3, cv::Scalar(10, 20, 30))));
 
   DatasetSource source(dir);
   EXPECT_EQ(source.layout(), DatasetLayout::kSevenScenes);
@@ -253,6 +278,74 @@ TEST(DatasetSource, ReadsSevenScenesFolder) {
   ASSERT_TRUE(frames[2].T_W_C_gt.has_value());
   EXPECT_NEAR(frames[2].T_W_C_gt->translation().x(), 0.2, 1e-12);
   EXPECT_GT(frames[1].timestamp_ns, frames[0].timestamp_ns);
+}
+
+TEST(DatasetSource, ReadsSevenScenesFolderWithJpegColour) {
+  // Smooth seeded texture (slow waves, per channel): flat colour would survive JPEG exactly,
+  // pure noise would lose far more than a real photo does.
+  cv::RNG rng(7);
+  std::vector<cv::Mat> colours;
+  for (int i = 0; i < 3; ++i) {
+    cv::Mat colour(480, 640, CV_8UC3);
+    cv::Vec3d kx, ky, phase;
+    for (int c = 0; c < 3; ++c) {
+      kx[c] = rng.uniform(0.01, 0.08), ky[c] = rng.uniform(0.01, 0.08);
+      phase[c] = rng.uniform(0.0, 6.28);
+    }
+    for (int v = 0; v < colour.rows; ++v) {
+      for (int u = 0; u < colour.cols; ++u) {
+        for (int c = 0; c < 3; ++c) {
+          colour.at<cv::Vec3b>(v, u)[c] = cv::saturate_cast<std::uint8_t>(
+              128 + 60 * std::sin(kx[c] * u + phase[c]) + 60 * std::sin(ky[c] * v));
+        }
+      }
+    }
+    colours.push_back(colour);
+  }
+  const fs::path base = test::freshTempDir();
+  const fs::path png_dir = base / "png" / "seq-01";
+  const fs::path jpg_dir = base / "jpg" / "seq-01";
+  writeSevenScenesSequence(png_dir, colours);
+  copySevenScenesAsJpeg(png_dir, jpg_dir);
+  ASSERT_TRUE(fs::exists(jpg_dir / "frame-000000.color.jpg"));
+  ASSERT_FALSE(fs::exists(jpg_dir / "frame-000000.color.png"));
+
+  EXPECT_EQ(detectDatasetLayout(jpg_dir), DatasetLayout::kSevenScenes);
+  DatasetSource png_source(png_dir);
+  DatasetSource jpg_source(jpg_dir);
+  EXPECT_EQ(jpg_source.layout(), DatasetLayout::kSevenScenes);
+  ASSERT_EQ(jpg_source.frameCount().value_or(0), png_source.frameCount().value_or(0));
+  std::size_t bad = 0;
+  const auto png_frames = readAll(png_source);
+  const auto jpg_frames = readAll(jpg_source, &bad);
+  EXPECT_EQ(bad, 0u);
+  ASSERT_EQ(png_frames.size(), 3u);
+  ASSERT_EQ(jpg_frames.size(), png_frames.size());
+  for (std::size_t i = 0; i < png_frames.size(); ++i) {
+    const core::Frame& png = png_frames[i];
+    const core::Frame& jpg = jpg_frames[i];
+    ASSERT_EQ(jpg.depth_mm.size(), png.depth_mm.size());
+    EXPECT_EQ(cv::norm(jpg.depth_mm, png.depth_mm, cv::NORM_INF), 0.0) << "frame " << i;
+    ASSERT_EQ(jpg.rgb.size(), png.rgb.size());
+    ASSERT_EQ(jpg.rgb.type(), png.rgb.type());
+    // JPEG is lossy: close to the PNG colour, but not identical.
+    const double mean_abs_error =
+        cv::norm(jpg.rgb, png.rgb, cv::NORM_L1) / static_cast<double>(png.rgb.total() * 3);
+    EXPECT_GT(mean_abs_error, 0.0) << "frame " << i;
+    EXPECT_LT(mean_abs_error, 3.0) << "frame " << i;
+    ASSERT_TRUE(png.T_W_C_gt.has_value());
+    ASSERT_TRUE(jpg.T_W_C_gt.has_value());
+    EXPECT_TRUE(jpg.T_W_C_gt->matrix() == png.T_W_C_gt->matrix()) << "frame " << i;
+  }
+
+  // Where both exist the PNG is read; a .jpeg extension is read too.
+  fs::copy_file(png_dir / "frame-000000.color.png", jpg_dir / "frame-000000.color.png");
+  fs::rename(jpg_dir / "frame-000001.color.jpg", jpg_dir / "frame-000001.color.jpeg");
+  DatasetSource mixed_source(jpg_dir);
+  const auto mixed_frames = readAll(mixed_source);
+  ASSERT_EQ(mixed_frames.size(), 3u);
+  EXPECT_EQ(cv::norm(mixed_frames[0].rgb, png_frames[0].rgb, cv::NORM_INF), 0.0);
+  EXPECT_EQ(cv::norm(mixed_frames[1].rgb, jpg_frames[1].rgb, cv::NORM_INF), 0.0);
 }
 
 TEST(DatasetSource, UnknownFolderListsTheKnownLayouts) {

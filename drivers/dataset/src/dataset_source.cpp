@@ -44,7 +44,7 @@ DatasetLayout detectDatasetLayout(const fs::path& dir) {
   throw core::SourceError(fmt::format(
       "{}: not a recording tessera knows. Known folder layouts:\n"
       "  TUM RGB-D  rgb.txt + depth.txt (+ associations.txt, groundtruth.txt)\n"
-      "  7-Scenes   frame-NNNNNN.color.png / .depth.png / .pose.txt (+ camera-intrinsics.txt)\n"
+      "  7-Scenes   frame-N.color.png|jpg / .depth.png / .pose.txt (+ camera-intrinsics.txt)\n"
       "  Redwood    color/ + depth/ (+ rgbd.match, trajectory.log, intrinsic JSON)\n"
       "  slambook   color/ + depth/ + pose.txt",
       dir.string()));

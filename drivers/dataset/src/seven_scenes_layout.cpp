@@ -1,6 +1,10 @@
 // 7-Scenes sequence folders: frame-NNNNNN.color.png, frame-NNNNNN.depth.png (millimetres,
-// 65535 = invalid) and frame-NNNNNN.pose.txt (4x4 camera-to-world).
+// 65535 = invalid) and frame-NNNNNN.pose.txt (4x4 camera-to-world). Several public copies
+// ship the colour as frame-NNNNNN.color.jpg (or .jpeg) instead.
+#include <algorithm>
+#include <array>
 #include <fstream>
+#include <string_view>
 
 #include <fmt/format.h>
 
@@ -12,6 +16,9 @@ namespace tessera::drivers::internal {
 namespace {
 
 constexpr const char* kPrefix = "frame-";
+// In order of preference: a frame with several colour files is listed once, from the first.
+constexpr std::array<std::string_view, 3> kColourSuffixes = {".color.png", ".color.jpg",
+                                                             ".color.jpeg"};
 
 Eigen::Matrix4d readMatrix4(const std::filesystem::path& path) {
   std::ifstream in(path);
@@ -48,9 +55,15 @@ DatasetListing listSevenScenes(const std::filesystem::path& dir) {
   listing.max_depth_is_invalid = true;
   for (const auto& file : sortedFiles(dir)) {
     const std::string name = file.filename().string();
-    const std::string suffix = ".color.png";
-    if (name.rfind(kPrefix, 0) != 0 || !name.ends_with(suffix)) continue;
-    const std::string stem = name.substr(0, name.size() - suffix.size());
+    if (name.rfind(kPrefix, 0) != 0) continue;
+    const auto suffix = std::find_if(kColourSuffixes.begin(), kColourSuffixes.end(),
+                                     [&](std::string_view s) { return name.ends_with(s); });
+    if (suffix == kColourSuffixes.end()) continue;
+    const std::string stem = name.substr(0, name.size() - suffix->size());
+    const bool preferred_exists = std::any_of(
+        kColourSuffixes.begin(), suffix,
+        [&](std::string_view s) { return std::filesystem::exists(dir / (stem + std::string(s))); });
+    if (preferred_exists) continue;  // that file lists this frame
     DatasetEntry entry;
     entry.rgb = file;
     entry.depth = dir / (stem + ".depth.png");
