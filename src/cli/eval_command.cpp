@@ -8,27 +8,60 @@
 
 namespace tessera::cli {
 
+namespace {
+
+// One line per figure on stdout, for people and scripts alike; the per-plane and per-texture
+// lists stay in report.json.
+void printFigures(const nlohmann::json& figures) {
+  for (const auto& [key, value] : figures.items()) {
+    if (key != "planes" && key != "textures") fmt::print("{}: {}\n", key, value.dump());
+  }
+}
+
+}  // namespace
+
 CLI::App* addEvalCommand(CLI::App& app, EvalArguments& args) {
   CLI::App* eval = app.add_subcommand(
-      "eval", "Compare a run (OUT of tessera run) with ground truth (a recording's .gt.json)");
+      "eval",
+      "Measure a run (OUT of tessera run): against ground truth (a recording's .gt.json), and/or "
+      "by rendering its textured patches into the captured frames (--frames SOURCE)");
   eval->add_option("RUN_DIR", args.run_dir, "Output folder of tessera run")
       ->required()
       ->check(CLI::ExistingDirectory);
   eval->add_option("GT", args.ground_truth, "Ground-truth file, e.g. recordings/office.gt.json")
-      ->required()
       ->check(CLI::ExistingFile);
+  eval->add_option("--frames", args.frames,
+                   "View PSNR: render patches.obj and mesh.ply at the run's poses into the frames "
+                   "of this source (the one the run read, with the same --depth-scale and "
+                   "--intrinsics) and compare over the same pixels");
+  eval->add_option("--save", args.save_dir,
+                   "With --frames: write render | captured | difference PNGs of a few views here");
+  eval->add_option("--max-views", args.max_views,
+                   "With --frames: training views to score, spread evenly (held-out views "
+                   "likewise)")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  addSourceOptions(*eval, args.source_args);
   return eval;
 }
 
 int evalCommand(const EvalArguments& args) {
+  if (args.ground_truth.empty() && args.frames.empty()) {
+    spdlog::error("eval: give a ground-truth file (GT), --frames SOURCE, or both");
+    return 2;
+  }
   try {
-    const nlohmann::json figures = eval::evaluateRun(args.run_dir, args.ground_truth);
-    // One line per figure on stdout, for people and scripts alike.
-    for (const auto& [key, value] : figures.items()) {
-      // The per-plane and per-texture lists stay in report.json.
-      if (key != "planes" && key != "textures") fmt::print("{}: {}\n", key, value.dump());
+    if (!args.ground_truth.empty()) {
+      printFigures(eval::evaluateRun(args.run_dir, args.ground_truth));
     }
-    spdlog::info("ground-truth figures written into {}/report.json", args.run_dir);
+    if (!args.frames.empty()) {
+      const std::unique_ptr<core::FrameSource> source = openSource(args.frames, args.source_args);
+      eval::ViewEvaluationOptions options;
+      options.max_views = args.max_views;
+      options.save_dir = args.save_dir;
+      printFigures(eval::evaluateRunViews(args.run_dir, *source, options));
+    }
+    spdlog::info("figures written into {}/report.json", args.run_dir);
     return 0;
   } catch (const core::Error& e) {
     spdlog::error("{}", e.what());

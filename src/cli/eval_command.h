@@ -1,14 +1,20 @@
 #pragma once
-// `tessera eval RUN_DIR GT.json`: ground-truth figures for a run.
+// `tessera eval RUN_DIR [GT.json] [--frames SOURCE]`: ground-truth and view figures for a run.
 #include <string>
 
 #include <CLI/CLI.hpp>
+
+#include "source_factory.h"
 
 namespace tessera::cli {
 
 struct EvalArguments {
   std::string run_dir;
   std::string ground_truth;
+  std::string frames;  // --frames: the source whose captured frames the map is rendered into
+  std::string save_dir;
+  int max_views = 20;
+  SourceArguments source_args;
 };
 
 CLI::App* addEvalCommand(CLI::App& app, EvalArguments& args);

@@ -35,6 +35,11 @@ CLI::App* addRunCommand(CLI::App& app, RunArguments& args) {
                   "ground truth")
       ->check(CLI::IsMember({"track", "gt"}))
       ->capture_default_str();
+  run->add_option("--holdout-every", args.holdout_every,
+                  "Leave every N-th frame out of fusion and texturing (it is still posed), so "
+                  "that `tessera eval --frames` scores views the map was not built from (0: none)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
   run->add_option("--record", args.source_args.record_path,
                   "Live devices: also record what the device sends to this .oni file "
                   "(OpenNI2's Recorder, lossless; replays with `tessera run FILE`)");
@@ -59,6 +64,7 @@ int runCommand(const RunArguments& args) {
     run_options.threads = threads;
     run_options.poses =
         args.poses == "gt" ? pipeline::PoseSource::kGroundTruth : pipeline::PoseSource::kTrack;
+    run_options.holdout_every = args.holdout_every;
     if (args.source_args.max_frames > 0) run_options.max_frames = args.source_args.max_frames;
     run_options.on_progress = [&progress](const pipeline::Progress& p) { progress.update(p); };
     if (source->isLive()) run_options.stop = &stopOnInterrupt();

@@ -15,6 +15,7 @@ struct RunArguments {
   std::string out_dir = "tessera_out";
   int threads = 0;
   std::string poses = "track";
+  int holdout_every = 0;
   SourceArguments source_args;
 };
 

@@ -18,6 +18,16 @@ namespace tessera::eval {
 
 namespace {
 
+// Sets `figures` in the report and writes it back.
+void mergeIntoReport(const std::filesystem::path& report_path, nlohmann::json& report,
+                     const nlohmann::json& figures) {
+  for (const auto& [key, value] : figures.items()) report[key] = value;
+  std::ofstream out(report_path);
+  out << report.dump(2) << '\n';
+  out.close();
+  if (!out) throw core::Error(fmt::format("{}: cannot write (disk full?)", report_path.string()));
+}
+
 nlohmann::json readJson(const std::filesystem::path& path) {
   std::ifstream in(path);
   if (!in) throw core::Error(fmt::format("{}: cannot open", path.string()));
@@ -155,12 +165,26 @@ nlohmann::json evaluateRun(const std::filesystem::path& run_dir,
     figures[key] = nullptr;
   }
   figures["ground_truth"] = ground_truth.string();
-  for (const auto& [key, value] : figures.items()) report[key] = value;
+  mergeIntoReport(report_path, report, figures);
+  return figures;
+}
 
-  std::ofstream out(report_path);
-  out << report.dump(2) << '\n';
-  out.close();
-  if (!out) throw core::Error(fmt::format("{}: cannot write (disk full?)", report_path.string()));
+nlohmann::json evaluateRunViews(const std::filesystem::path& run_dir, core::FrameSource& frames,
+                                ViewEvaluationOptions options) {
+  const auto report_path = run_dir / "report.json";
+  nlohmann::json report = readJson(report_path);
+  if (const auto every = report.find("holdout_every");
+      every != report.end() && every->is_number_integer()) {
+    options.holdout_every = every->get<int>();
+  }
+  const RenderMesh patches = readTexturedObj(run_dir / "patches.obj");
+  const RenderMesh mesh = readColouredPly(run_dir / "mesh.ply");
+  const Trajectory poses = readTumTrajectory(run_dir / "trajectory.txt");
+  const ViewEvaluation views =
+      evaluateViews({{"patches", &patches}, {"mesh", &mesh}}, frames, poses, options);
+  nlohmann::json figures = viewFigures(views);
+  figures["view_frames_source"] = frames.name();
+  mergeIntoReport(report_path, report, figures);
   return figures;
 }
 

@@ -60,7 +60,7 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
 
   SourceStage source_stage(source, options.max_frames, options.stop);
   TrackingStage tracking_stage(config.tracker, options.poses);
-  IntegrationStage integration_stage(config.tsdf, threads);
+  IntegrationStage integration_stage(config.tsdf, threads, options.holdout_every);
   planes::PlaneAlignmentConfig alignment = config.pose_correction;
   alignment.enabled = alignment.enabled && options.poses == PoseSource::kTrack;
   PlaneStage plane_stage(config.planes, config.patches, alignment);
@@ -81,6 +81,8 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
   summary.frames_bad = source_stage.badFrames();
   summary.frames_integrated = integration_stage.framesIntegrated();
   summary.frames_without_pose = integration_stage.framesSkipped();
+  summary.holdout_every = options.holdout_every;
+  summary.frames_held_out = integration_stage.framesHeldOut();
   summary.poses = options.poses == PoseSource::kTrack ? "track" : "gt";
   summary.tracking_losses = tracking_stage.trackingLosses();
   summary.tracking_restarts = tracking_stage.trackingRestarts();
@@ -143,6 +145,8 @@ void writeReport(const RunSummary& summary, const std::filesystem::path& path) {
       {"frames_bad", summary.frames_bad},
       {"frames_integrated", summary.frames_integrated},
       {"frames_without_pose", summary.frames_without_pose},
+      {"holdout_every", summary.holdout_every},
+      {"frames_held_out", summary.frames_held_out},
       {"poses", summary.poses},
       {"tracking_losses", summary.tracking_losses},
       {"tracking_restarts", summary.tracking_restarts},
@@ -164,6 +168,11 @@ void writeReport(const RunSummary& summary, const std::filesystem::path& path) {
       {"bitmap_ms_per_m2", summary.bitmap_ms_per_m2},
   };
   report["ate_m"] = summary.ate ? json(summary.ate->rmse_m) : json(nullptr);
+  // View PSNR needs the captured frames again: `tessera eval RUN_DIR --frames SOURCE` fills it.
+  for (const char* key : {"view_psnr_mean", "view_psnr_baseline_mean", "view_psnr_holdout_mean",
+                          "view_psnr_baseline_holdout_mean", "view_pixels"}) {
+    report[key] = nullptr;
+  }
   report["ate_max_m"] = summary.ate ? json(summary.ate->max_m) : json(nullptr);
   report["ate_pairs"] = summary.ate ? summary.ate->pairs : 0;
   const auto optional = [](const std::optional<double>& v) { return v ? json(*v) : json(nullptr); };

@@ -10,6 +10,7 @@
 #include "tessera/core/error.h"
 #include "tessera/core/registration.h"
 #include "tessera/eval/trajectory.h"
+#include "tessera/eval/view_evaluation.h"
 
 namespace tessera::pipeline {
 
@@ -112,7 +113,9 @@ TrackedFrame TrackingStage::process(core::Frame frame) {
   return tracked;
 }
 
-IntegrationStage::IntegrationStage(const fusion::TsdfConfig& tsdf, int thread_cap) : map_(tsdf) {
+IntegrationStage::IntegrationStage(const fusion::TsdfConfig& tsdf, int thread_cap,
+                                   int holdout_every)
+    : map_(tsdf), holdout_every_(holdout_every) {
   map_.setThreadCap(thread_cap);
 }
 
@@ -122,6 +125,15 @@ FusedFrame IntegrationStage::process(TrackedFrame tracked) {
   fused.skip_reason = std::move(tracked.skip_reason);
   fused.tracking_ms = tracked.tracking_ms;
   if (tracked.frame.source_interrupted) {
+    fused.frame = std::move(tracked.frame);
+    return fused;
+  }
+  if (eval::isHeldOut(tracked.frame.index, holdout_every_)) {
+    // Posed (the trajectory keeps it, for the view evaluation) but not part of the map.
+    fused.held_out = true;
+    if (fused.T_W_C) fused.skip_reason = "held out for evaluation (--holdout-every)";
+    ++held_out_;
+    fused.tsdf_bytes = map_.memoryBytes();
     fused.frame = std::move(tracked.frame);
     return fused;
   }
@@ -192,6 +204,13 @@ FusedFrame PlaneStage::process(FusedFrame fused) {
   if (fused.frame.source_interrupted) {
     // What was seen before the interruption is kept even if the device never comes back.
     fused.patch_events = finish(fused.finalized_patches);
+    fused.patches_live = map_.liveCount();
+    fused.patches_finalized = map_.finalizedCount();
+    return fused;
+  }
+  if (fused.held_out) {
+    // Only the pose, corrected as the frames around it are; the map does not see the frame.
+    if (fused.T_W_C) fused.T_W_C_planes = correction_ * *fused.T_W_C;
     fused.patches_live = map_.liveCount();
     fused.patches_finalized = map_.finalizedCount();
     return fused;

@@ -4,6 +4,9 @@
 
 #include <nlohmann/json.hpp>
 
+#include "tessera/core/frame_source.h"
+#include "tessera/eval/view_evaluation.h"
+
 namespace tessera::eval {
 
 // Reads RUN_DIR/report.json and RUN_DIR/trajectory.txt and the ground-truth sidecar, computes
@@ -12,5 +15,13 @@ namespace tessera::eval {
 // Throws core::Error naming the file that is missing or malformed.
 nlohmann::json evaluateRun(const std::filesystem::path& run_dir,
                            const std::filesystem::path& ground_truth);
+
+// View PSNR of a run (docs/METRICS.md): RUN_DIR/patches.obj and RUN_DIR/mesh.ply rendered at
+// the poses of RUN_DIR/trajectory.txt into the frames of `frames` (the source the run read),
+// over the same pixels; held-out frames as report.json's holdout_every says. Writes the figures
+// into RUN_DIR/report.json and returns them. Throws core::Error naming a missing or malformed
+// file.
+nlohmann::json evaluateRunViews(const std::filesystem::path& run_dir, core::FrameSource& frames,
+                                ViewEvaluationOptions options);
 
 }  // namespace tessera::eval

@@ -18,6 +18,7 @@ struct RunOptions {
   int threads = 0;  // 0: hardware threads
   PoseSource poses = PoseSource::kTrack;
   std::optional<std::size_t> max_frames;
+  int holdout_every = 0;  // every N-th frame is posed only, for eval's held-out views (0: none)
   StatsSink::ProgressCallback on_progress;  // may be empty
   const std::atomic<bool>* stop = nullptr;  // set (e.g. by Ctrl-C) to end the stream early
 };
@@ -36,6 +37,8 @@ struct RunSummary {
   std::size_t frames_bad = 0;  // unreadable frames, skipped
   std::size_t frames_integrated = 0;
   std::size_t frames_without_pose = 0;  // not integrated: no pose, tracking lost, or rejected
+  int holdout_every = 0;
+  std::size_t frames_held_out = 0;  // posed but not fused or textured (--holdout-every)
   std::string poses;                    // "track" or "gt"
   std::size_t tracking_losses = 0;
   std::size_t tracking_restarts = 0;

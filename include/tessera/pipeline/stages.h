@@ -76,6 +76,7 @@ struct TrackedFrame {
 struct FusedFrame {
   core::Frame frame;
   bool integrated = false;
+  bool held_out = false;  // left out of fusion and texturing (run --holdout-every)
   std::optional<core::Isometry> T_W_C;  // the pose it was fused at
   std::string skip_reason;              // why the frame was not integrated
   std::size_t tsdf_bytes = 0;
@@ -121,18 +122,23 @@ class TrackingStage {
 // Runs beside the tracking stage: frame N is integrated while frame N+1 is tracked.
 class IntegrationStage {
  public:
-  IntegrationStage(const fusion::TsdfConfig& tsdf, int thread_cap);
+  // Every holdout_every-th frame (eval::isHeldOut) is posed but neither fused nor textured, so
+  // that `tessera eval` can score views the map was not built from (0: none).
+  IntegrationStage(const fusion::TsdfConfig& tsdf, int thread_cap, int holdout_every = 0);
 
   FusedFrame process(TrackedFrame tracked);
 
   const fusion::TsdfMap& map() const { return map_; }
   std::size_t framesIntegrated() const { return integrated_; }
   std::size_t framesSkipped() const { return skipped_; }
+  std::size_t framesHeldOut() const { return held_out_; }
   std::size_t blocksReleased() const { return blocks_released_; }
   const StageTimer& timer() const { return timer_; }
 
  private:
   fusion::TsdfMap map_;
+  int holdout_every_;
+  std::size_t held_out_ = 0;
   std::size_t integrated_ = 0;
   std::size_t skipped_ = 0;
   std::size_t blocks_released_ = 0;

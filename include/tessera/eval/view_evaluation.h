@@ -1,0 +1,79 @@
+#pragma once
+// View PSNR (docs/METRICS.md): a run's textured patches rendered from the run's own camera
+// poses into the captured colour frames, compared over the pixels the patches cover, beside
+// other models (the run's vertex-coloured TSDF mesh; in bench/, Open3D's meshes) rendered the
+// same way and compared over exactly the same pixels.
+#include <cstddef>
+#include <cstdint>
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "tessera/core/frame_source.h"
+#include "tessera/eval/trajectory.h"
+#include "tessera/eval/view_render.h"
+
+namespace tessera::eval {
+
+// Whether frame `index` is left out of fusion and texturing by `tessera run --holdout-every N`
+// (every N-th frame: N-1, 2N-1, ...; the first frame always builds the map). 0: none.
+bool isHeldOut(std::uint64_t index, int holdout_every);
+
+struct ViewModel {
+  std::string name;
+  const RenderMesh* mesh = nullptr;
+};
+
+struct ViewEvaluationOptions {
+  int max_views = 20;     // training views, spread evenly over the frames; held-out views likewise
+  int holdout_every = 0;  // the run's --holdout-every
+  // A rendered patch pixel counts only where the captured depth agrees with the patch's depth
+  // within depth_tolerance_m + depth_tolerance_per_m2 * z^2 (the structured-light noise grows
+  // with z^2): where something stands in front of the patch, the patch is not what was seen.
+  double depth_tolerance_m = 0.02;
+  double depth_tolerance_per_m2 = 0.005;
+  std::size_t min_pixels = 500;  // views with fewer common pixels are not scored
+  std::filesystem::path save_dir;  // non-empty: render | captured | difference PNGs
+  int save_views = 4;
+};
+
+struct ViewScore {
+  std::uint64_t index = 0;
+  std::int64_t timestamp_ns = 0;
+  bool held_out = false;
+  std::size_t pixels = 0;    // compared, the same for every model
+  std::vector<double> psnr;  // per model, dB
+};
+
+struct ViewEvaluation {
+  std::vector<std::string> models;
+  std::vector<ViewScore> views;
+  // Mean over the scored views (training or held-out) of model m's PSNR; nothing without views.
+  std::optional<double> meanPsnr(std::size_t model, bool held_out) const;
+  std::size_t pixels(bool held_out) const;
+  std::size_t viewCount(bool held_out) const;
+};
+
+// Renders every model at each chosen frame's pose in `poses` (by timestamp, within 1 ms) and
+// compares it with the frame's colour over the common pixels: covered by models[0], its depth
+// confirmed by the captured depth, and covered by every other model. Frames without a pose
+// are skipped. `progress`, when given, is called after each view scored. Throws core::Error
+// when no model is given or the source fails.
+ViewEvaluation evaluateViews(const std::vector<ViewModel>& models, core::FrameSource& frames,
+                             const Trajectory& poses, const ViewEvaluationOptions& options);
+
+// The report.json keys of docs/METRICS.md for a run evaluated as {patches, mesh}:
+// view_psnr_mean, view_psnr_baseline_mean, view_psnr_holdout_mean,
+// view_psnr_baseline_holdout_mean, view_pixels, view_pixels_holdout, view_frames,
+// view_frames_holdout (null where there are no views).
+nlohmann::json viewFigures(const ViewEvaluation& evaluation);
+
+// Peak signal-to-noise ratio in dB of 8-bit RGB `rendered` against `captured` over `mask`
+// (CV_8UC1); nothing when the mask is empty. Identical pixels give 99 dB, not infinity.
+std::optional<double> maskedPsnr(const cv::Mat& rendered, const cv::Mat& captured,
+                                 const cv::Mat& mask);
+
+}  // namespace tessera::eval

@@ -1,0 +1,47 @@
+#pragma once
+// A small CPU rasteriser for the view evaluation (docs/METRICS.md, view PSNR): renders a
+// textured map (patches.obj with its RGBA bitmaps) or a vertex-coloured mesh (mesh.ply) from a
+// camera pose into an image the size of the captured frame, with a depth buffer.
+#include <filesystem>
+#include <vector>
+
+#include <Eigen/Core>
+#include <opencv2/core/mat.hpp>
+
+#include "tessera/core/intrinsics.h"
+#include "tessera/core/pose.h"
+
+namespace tessera::eval {
+
+// World-space triangles, either vertex-coloured or textured (one RGBA texture per triangle).
+struct RenderMesh {
+  std::vector<Eigen::Vector3f> vertices;
+  std::vector<Eigen::Vector3i> triangles;
+  std::vector<Eigen::Vector3f> colours;    // vertex-coloured: RGB in [0, 255] per vertex
+  std::vector<Eigen::Vector2f> uvs;        // textured: (s, t) per triangle corner, OBJ convention
+  std::vector<int> texture_of;             // textured: per triangle, index into textures or -1
+  std::vector<cv::Mat> textures;           // CV_8UC4 RGBA; texels with alpha 0 cover nothing
+  bool textured() const { return !texture_of.empty(); }
+};
+
+// Reads an OBJ with its MTL and map_Kd images (as tessera writes patches.obj). Faces whose
+// material has no image are not drawn. Throws core::Error naming the file that is missing or
+// malformed.
+RenderMesh readTexturedObj(const std::filesystem::path& path);
+
+// Reads a vertex-coloured PLY (mesh.ply). Throws core::Error naming the file.
+RenderMesh readColouredPly(const std::filesystem::path& path);
+
+struct ViewImage {
+  cv::Mat rgb;    // CV_8UC3
+  cv::Mat depth;  // CV_32F, camera z in metres; 0 where nothing was drawn
+};
+
+// Renders `mesh` seen by a pinhole camera at T_W_C (pixel (x, y) is the ray through
+// ((x - cx) / fx, (y - cy) / fy, 1), as tessera samples frames). Triangles are clipped at
+// near_m, depth-tested, and their colours interpolated perspective-correctly; textures are
+// sampled bilinearly over their opaque texels.
+ViewImage renderView(const RenderMesh& mesh, const core::Intrinsics& intrinsics,
+                     const core::Isometry& T_W_C, double near_m = 0.05);
+
+}  // namespace tessera::eval

@@ -1,0 +1,213 @@
+#include "tessera/eval/view_evaluation.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "tessera/core/error.h"
+#include "tessera/core/registration.h"
+
+namespace tessera::eval {
+
+namespace {
+
+constexpr std::int64_t kMaxPoseGapNs = 1'000'000;  // a pose belongs to a frame within 1 ms
+
+std::optional<core::Isometry> poseAt(const Trajectory& poses, std::int64_t timestamp_ns) {
+  auto it = poses.lower_bound(timestamp_ns - kMaxPoseGapNs);
+  if (it == poses.end() || it->first > timestamp_ns + kMaxPoseGapNs) return std::nullopt;
+  return it->second;
+}
+
+// Pixels where the first model drew something that the captured depth confirms.
+cv::Mat confirmedCoverage(const ViewImage& view, const core::Frame& frame,
+                          const ViewEvaluationOptions& options) {
+  cv::Mat mask = cv::Mat::zeros(view.depth.size(), CV_8UC1);
+  for (int y = 0; y < mask.rows; ++y) {
+    const auto* rendered = view.depth.ptr<float>(y);
+    const auto* captured = frame.depth_mm.ptr<std::uint16_t>(y);
+    auto* out = mask.ptr<std::uint8_t>(y);
+    for (int x = 0; x < mask.cols; ++x) {
+      if (rendered[x] <= 0.0F || captured[x] == 0) continue;
+      const double z = rendered[x];
+      const double tolerance =
+          options.depth_tolerance_m + options.depth_tolerance_per_m2 * z * z;
+      if (std::abs(captured[x] / 1000.0 - z) <= tolerance) out[x] = 255;
+    }
+  }
+  return mask;
+}
+
+// render | captured | |difference| (x4), with the pixels outside the mask dimmed.
+void saveComparison(const cv::Mat& rendered, const cv::Mat& captured, const cv::Mat& mask,
+                    const std::filesystem::path& path) {
+  cv::Mat difference;
+  cv::absdiff(rendered, captured, difference);
+  difference *= 4.0;
+  cv::Mat outside;
+  cv::bitwise_not(mask, outside);
+  std::vector<cv::Mat> panels = {rendered.clone(), captured.clone(), difference};
+  for (cv::Mat& panel : panels) {
+    cv::Mat dimmed = panel / 4;
+    dimmed.copyTo(panel, outside);
+  }
+  cv::Mat row, bgr;
+  cv::hconcat(panels, row);
+  cv::cvtColor(row, bgr, cv::COLOR_RGB2BGR);
+  if (!cv::imwrite(path.string(), bgr)) {
+    throw core::Error(fmt::format("{}: could not be written", path.string()));
+  }
+}
+
+// Spreads `wanted` views evenly over `total` candidates: every stride-th is taken.
+std::size_t strideFor(std::optional<std::size_t> total, int wanted) {
+  if (!total || wanted <= 0) return 1;
+  return std::max<std::size_t>(1, (*total + static_cast<std::size_t>(wanted) - 1) /
+                                      static_cast<std::size_t>(wanted));
+}
+
+}  // namespace
+
+bool isHeldOut(std::uint64_t index, int holdout_every) {
+  return holdout_every > 1 && (index + 1) % static_cast<std::uint64_t>(holdout_every) == 0;
+}
+
+std::optional<double> maskedPsnr(const cv::Mat& rendered, const cv::Mat& captured,
+                                 const cv::Mat& mask) {
+  double squared = 0.0;
+  std::size_t count = 0;
+  for (int y = 0; y < mask.rows; ++y) {
+    const auto* a = rendered.ptr<cv::Vec3b>(y);
+    const auto* b = captured.ptr<cv::Vec3b>(y);
+    const auto* m = mask.ptr<std::uint8_t>(y);
+    for (int x = 0; x < mask.cols; ++x) {
+      if (m[x] == 0) continue;
+      for (int c = 0; c < 3; ++c) {
+        const double d = static_cast<double>(a[x][c]) - static_cast<double>(b[x][c]);
+        squared += d * d;
+      }
+      count += 3;
+    }
+  }
+  if (count == 0) return std::nullopt;
+  const double mse = squared / static_cast<double>(count);
+  return mse <= 0.0 ? 99.0 : 10.0 * std::log10(255.0 * 255.0 / mse);
+}
+
+std::optional<double> ViewEvaluation::meanPsnr(std::size_t model, bool held_out) const {
+  double sum = 0.0;
+  std::size_t n = 0;
+  for (const ViewScore& view : views) {
+    if (view.held_out != held_out) continue;
+    sum += view.psnr.at(model);
+    ++n;
+  }
+  if (n == 0) return std::nullopt;
+  return sum / static_cast<double>(n);
+}
+
+std::size_t ViewEvaluation::pixels(bool held_out) const {
+  std::size_t total = 0;
+  for (const ViewScore& view : views) {
+    if (view.held_out == held_out) total += view.pixels;
+  }
+  return total;
+}
+
+std::size_t ViewEvaluation::viewCount(bool held_out) const {
+  return static_cast<std::size_t>(std::count_if(
+      views.begin(), views.end(), [&](const ViewScore& v) { return v.held_out == held_out; }));
+}
+
+ViewEvaluation evaluateViews(const std::vector<ViewModel>& models, core::FrameSource& frames,
+                             const Trajectory& poses, const ViewEvaluationOptions& options) {
+  if (models.empty()) throw core::Error("view evaluation: no model to render");
+  ViewEvaluation evaluation;
+  for (const ViewModel& model : models) evaluation.models.push_back(model.name);
+  if (!options.save_dir.empty()) std::filesystem::create_directories(options.save_dir);
+
+  // Held-out frames are every holdout_every-th; the rest are training frames.
+  const std::optional<std::size_t> total = frames.frameCount();
+  std::optional<std::size_t> held_out_total;
+  if (total) held_out_total = options.holdout_every > 1 ? *total / static_cast<std::size_t>(options.holdout_every) : 0;
+  const std::size_t train_stride =
+      strideFor(total ? std::optional(*total - *held_out_total) : std::nullopt, options.max_views);
+  const std::size_t held_out_stride = strideFor(held_out_total, options.max_views);
+  std::size_t seen[2] = {0, 0};  // training, held-out frames met so far
+  int saved = 0;
+  const int save_every = std::max(1, options.max_views / std::max(1, options.save_views));
+
+  for (;;) {
+    core::ReadResult result = frames.read();
+    if (result.status == core::ReadStatus::kEndOfData) {
+      if (!result.problem.empty()) {
+        spdlog::warn("{}: {}; views scored so far are kept", frames.name(), result.problem);
+      }
+      break;
+    }
+    if (result.status != core::ReadStatus::kFrame) continue;
+    core::Frame& frame = result.frame;
+    const bool held_out = isHeldOut(frame.index, options.holdout_every);
+    const std::size_t position = seen[held_out ? 1 : 0]++;
+    if (position % (held_out ? held_out_stride : train_stride) != 0) continue;
+    const std::optional<core::Isometry> T_W_C = poseAt(poses, frame.timestamp_ns);
+    if (!T_W_C) continue;
+    if (frame.colour_camera) frame = core::withRegisteredColour(std::move(frame));
+    if (frame.rgb.empty() || frame.depth_mm.empty()) continue;
+
+    std::vector<ViewImage> renders;
+    for (const ViewModel& model : models) {
+      renders.push_back(renderView(*model.mesh, frame.intrinsics, *T_W_C));
+    }
+    cv::Mat mask = confirmedCoverage(renders[0], frame, options);
+    for (std::size_t m = 1; m < renders.size(); ++m) mask &= renders[m].depth > 0.0F;
+    ViewScore score;
+    score.index = frame.index;
+    score.timestamp_ns = frame.timestamp_ns;
+    score.held_out = held_out;
+    score.pixels = static_cast<std::size_t>(cv::countNonZero(mask));
+    if (score.pixels < options.min_pixels) continue;
+    for (const ViewImage& render : renders) {
+      score.psnr.push_back(*maskedPsnr(render.rgb, frame.rgb, mask));
+    }
+    const std::size_t scored = evaluation.views.size();
+    if (!options.save_dir.empty() && saved < options.save_views &&
+        scored % static_cast<std::size_t>(save_every) == 0) {
+      for (std::size_t m = 0; m < models.size(); ++m) {
+        saveComparison(renders[m].rgb, frame.rgb, mask,
+                       options.save_dir / fmt::format("view_{:06d}{}_{}.png", frame.index,
+                                                      held_out ? "_heldout" : "", models[m].name));
+      }
+      ++saved;
+    }
+    spdlog::debug("view {}{}: {} pixels, {:.2f} dB ({})", frame.index, held_out ? " (held out)" : "",
+                  score.pixels, score.psnr[0], models[0].name);
+    evaluation.views.push_back(std::move(score));
+  }
+  return evaluation;
+}
+
+nlohmann::json viewFigures(const ViewEvaluation& evaluation) {
+  const auto figure = [](std::optional<double> value) {
+    return value ? nlohmann::json(*value) : nlohmann::json(nullptr);
+  };
+  const bool has_baseline = evaluation.models.size() > 1;
+  nlohmann::json figures = {
+      {"view_psnr_mean", figure(evaluation.meanPsnr(0, false))},
+      {"view_psnr_baseline_mean",
+       has_baseline ? figure(evaluation.meanPsnr(1, false)) : nlohmann::json(nullptr)},
+      {"view_psnr_holdout_mean", figure(evaluation.meanPsnr(0, true))},
+      {"view_psnr_baseline_holdout_mean",
+       has_baseline ? figure(evaluation.meanPsnr(1, true)) : nlohmann::json(nullptr)},
+      {"view_pixels", evaluation.pixels(false)},
+      {"view_pixels_holdout", evaluation.pixels(true)},
+      {"view_frames", evaluation.viewCount(false)},
+      {"view_frames_holdout", evaluation.viewCount(true)}};
+  return figures;
+}
+
+}  // namespace tessera::eval
