@@ -22,7 +22,8 @@ std::string resolvedSource(const std::string& path) {
 }
 
 std::unique_ptr<core::FrameSource> openSource(const std::string& path,
-                                              const std::optional<core::Intrinsics>& intrinsics) {
+                                              const std::optional<core::Intrinsics>& intrinsics,
+                                              const std::optional<double>& depth_units_per_m) {
   const std::string resolved = resolvedSource(path);
   if (fs::path(resolved).extension() == ".oni") {
     drivers::oni::OniSourceOptions options;
@@ -31,13 +32,15 @@ std::unique_ptr<core::FrameSource> openSource(const std::string& path,
   }
   drivers::DatasetOptions options;
   options.intrinsics = intrinsics;
+  options.depth_units_per_m = depth_units_per_m;
   return std::make_unique<drivers::DatasetSource>(resolved, options);
 }
 
 std::vector<core::Frame> loadFrames(const std::string& path, std::size_t max_frames,
                                     bool need_truth,
-                                    const std::optional<core::Intrinsics>& intrinsics) {
-  const auto source = openSource(path, intrinsics);
+                                    const std::optional<core::Intrinsics>& intrinsics,
+                                    const std::optional<double>& depth_units_per_m) {
+  const auto source = openSource(path, intrinsics, depth_units_per_m);
   std::vector<core::Frame> frames;
   while (max_frames == 0 || frames.size() < max_frames) {
     core::ReadResult result = source->read();

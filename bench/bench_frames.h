@@ -15,15 +15,19 @@ namespace tessera::bench {
 // recordings/tum_fr1_rpy_20.oni.
 std::string resolvedSource(const std::string& path);
 
-// A dataset folder or an .oni recording; `intrinsics` overrides what the source carries.
+// A dataset folder or an .oni recording; `intrinsics` overrides what the source carries, and
+// `depth_units_per_m` a dataset folder's raw depth units per metre (tessera run --depth-scale;
+// .oni recordings carry millimetres and ignore it).
 std::unique_ptr<core::FrameSource> openSource(
-    const std::string& path, const std::optional<core::Intrinsics>& intrinsics = std::nullopt);
+    const std::string& path, const std::optional<core::Intrinsics>& intrinsics = std::nullopt,
+    const std::optional<double>& depth_units_per_m = std::nullopt);
 
 // Reads up to max_frames good frames (0: all), colour registered to depth. With need_truth,
 // throws core::Error when a frame has no ground-truth pose.
 std::vector<core::Frame> loadFrames(
     const std::string& path, std::size_t max_frames, bool need_truth,
-    const std::optional<core::Intrinsics>& intrinsics = std::nullopt);
+    const std::optional<core::Intrinsics>& intrinsics = std::nullopt,
+    const std::optional<double>& depth_units_per_m = std::nullopt);
 
 // Replays frames held in memory, so that a measurement does not include decoding.
 class MemorySource : public core::FrameSource {
