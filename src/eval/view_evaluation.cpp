@@ -34,10 +34,13 @@ cv::Mat confirmedCoverage(const ViewImage& view, const core::Frame& frame,
     for (int x = 0; x < mask.cols; ++x) {
       if (rendered[x] <= 0.0F || captured[x] == 0) continue;
       const double z = rendered[x];
-      const double tolerance =
-          options.depth_tolerance_m + options.depth_tolerance_per_m2 * z * z;
+      const double tolerance = options.depth_tolerance_m + options.depth_tolerance_per_m2 * z * z;
       if (std::abs(captured[x] / 1000.0 - z) <= tolerance) out[x] = 255;
     }
+  }
+  if (const int margin = options.edge_margin_px; margin > 0) {
+    cv::erode(mask, mask,
+              cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * margin + 1, 2 * margin + 1)));
   }
   return mask;
 }
@@ -66,8 +69,8 @@ void saveComparison(const cv::Mat& rendered, const cv::Mat& captured, const cv::
 // Spreads `wanted` views evenly over `total` candidates: every stride-th is taken.
 std::size_t strideFor(std::optional<std::size_t> total, int wanted) {
   if (!total || wanted <= 0) return 1;
-  return std::max<std::size_t>(1, (*total + static_cast<std::size_t>(wanted) - 1) /
-                                      static_cast<std::size_t>(wanted));
+  return std::max<std::size_t>(
+      1, (*total + static_cast<std::size_t>(wanted) - 1) / static_cast<std::size_t>(wanted));
 }
 
 }  // namespace
@@ -133,7 +136,9 @@ ViewEvaluation evaluateViews(const std::vector<ViewModel>& models, core::FrameSo
   // Held-out frames are every holdout_every-th; the rest are training frames.
   const std::optional<std::size_t> total = frames.frameCount();
   std::optional<std::size_t> held_out_total;
-  if (total) held_out_total = options.holdout_every > 1 ? *total / static_cast<std::size_t>(options.holdout_every) : 0;
+  if (total)
+    held_out_total =
+        options.holdout_every > 1 ? *total / static_cast<std::size_t>(options.holdout_every) : 0;
   const std::size_t train_stride =
       strideFor(total ? std::optional(*total - *held_out_total) : std::nullopt, options.max_views);
   const std::size_t held_out_stride = strideFor(held_out_total, options.max_views);
@@ -184,8 +189,8 @@ ViewEvaluation evaluateViews(const std::vector<ViewModel>& models, core::FrameSo
       }
       ++saved;
     }
-    spdlog::debug("view {}{}: {} pixels, {:.2f} dB ({})", frame.index, held_out ? " (held out)" : "",
-                  score.pixels, score.psnr[0], models[0].name);
+    spdlog::debug("view {}{}: {} pixels, {:.2f} dB ({})", frame.index,
+                  held_out ? " (held out)" : "", score.pixels, score.psnr[0], models[0].name);
     evaluation.views.push_back(std::move(score));
   }
   return evaluation;

@@ -97,12 +97,14 @@ class Rasteriser {
     }
     const float area = edge(p[0], p[1], p[2]);
     if (std::abs(area) < 1e-12F) return;
-    const int x_min = std::max(0, static_cast<int>(std::ceil(std::min({p[0].x(), p[1].x(), p[2].x()}))));
-    const int x_max = std::min(view_.rgb.cols - 1,
-                               static_cast<int>(std::floor(std::max({p[0].x(), p[1].x(), p[2].x()}))));
-    const int y_min = std::max(0, static_cast<int>(std::ceil(std::min({p[0].y(), p[1].y(), p[2].y()}))));
-    const int y_max = std::min(view_.rgb.rows - 1,
-                               static_cast<int>(std::floor(std::max({p[0].y(), p[1].y(), p[2].y()}))));
+    const int x_min =
+        std::max(0, static_cast<int>(std::ceil(std::min({p[0].x(), p[1].x(), p[2].x()}))));
+    const int x_max = std::min(
+        view_.rgb.cols - 1, static_cast<int>(std::floor(std::max({p[0].x(), p[1].x(), p[2].x()}))));
+    const int y_min =
+        std::max(0, static_cast<int>(std::ceil(std::min({p[0].y(), p[1].y(), p[2].y()}))));
+    const int y_max = std::min(
+        view_.rgb.rows - 1, static_cast<int>(std::floor(std::max({p[0].y(), p[1].y(), p[2].y()}))));
     const std::array<float, 3> inverse_z = {1.0F / c[0].X_C.z(), 1.0F / c[1].X_C.z(),
                                             1.0F / c[2].X_C.z()};
     for (int y = y_min; y <= y_max; ++y) {
@@ -203,9 +205,9 @@ RenderMesh readTexturedObj(const std::filesystem::path& path) {
         const tinyobj::index_t& index = indices[first + static_cast<std::size_t>(j)];
         triangle[j] = index.vertex_index;
         const int tc = index.texcoord_index;
-        mesh.uvs.emplace_back(tc >= 0 ? attrib.texcoords[2 * static_cast<std::size_t>(tc)] : 0.0F,
-                              tc >= 0 ? attrib.texcoords[2 * static_cast<std::size_t>(tc) + 1]
-                                      : 0.0F);
+        mesh.uvs.emplace_back(
+            tc >= 0 ? attrib.texcoords[2 * static_cast<std::size_t>(tc)] : 0.0F,
+            tc >= 0 ? attrib.texcoords[2 * static_cast<std::size_t>(tc) + 1] : 0.0F);
       }
       mesh.triangles.push_back(triangle);
       mesh.texture_of.push_back(texture);

@@ -178,8 +178,10 @@ bool PlaneStage::wantsColours(std::uint64_t index, const core::Isometry& T_W_C) 
   return motion.translation().norm() > 0.05 || angle_deg > 3.0;
 }
 
-void PlaneStage::sampleColours(const core::Frame& frame, const planes::PlaneDetection& detection,
-                               const core::Isometry& T_W_C, std::vector<int> ids) {
+std::optional<Eigen::Vector3f> PlaneStage::sampleColours(const core::Frame& frame,
+                                                         const planes::PlaneDetection& detection,
+                                                         const core::Isometry& T_W_C,
+                                                         std::vector<int> ids) {
   if (wantsColours(frame.index, T_W_C)) {
     last_colour_pose_ = T_W_C;
   } else {
@@ -191,7 +193,7 @@ void PlaneStage::sampleColours(const core::Frame& frame, const planes::PlaneDete
       if (patch == nullptr || patch->samples.size() >= kFewSamples) id = -1;
     }
   }
-  map_.addColours(frame, detection, T_W_C, ids, sharpness_.measure(frame.rgb));
+  return map_.addColours(frame, detection, T_W_C, ids, sharpness_.measure(frame.rgb));
 }
 
 void PlaneStage::count(const std::vector<planes::PatchEvent>& events) {
@@ -233,7 +235,8 @@ FusedFrame PlaneStage::process(FusedFrame fused) {
             for (auto& X : observation.points_W) X = *D * X;
           }
         }
-        sampleColours(fused.frame, detection, *fused.T_W_C_planes, map_.add(observations));
+        fused.colour_gain =
+            sampleColours(fused.frame, detection, *fused.T_W_C_planes, map_.add(observations));
       }
     } catch (const core::Error& e) {
       spdlog::warn("plane detection skipped {}", e.what());
@@ -355,6 +358,10 @@ void StatsSink::process(const FusedFrame& fused) {
                            {"textures_stored", 0}};
     if (!fused.integrated) line["skip_reason"] = fused.skip_reason;
     if (fused.latency_ms) line["latency_ms"] = *fused.latency_ms;
+    if (fused.colour_gain) {
+      line["colour_gain"] = {(*fused.colour_gain)[0], (*fused.colour_gain)[1],
+                             (*fused.colour_gain)[2]};
+    }
     stats_ << line.dump() << '\n';
     writePatchEvents(fused.patch_events);
     if (pose) trajectory_ << eval::tumLine(fused.frame.timestamp_ns, *pose);

@@ -39,9 +39,11 @@ void readConfig(const core::ConfigSection& section, PatchMapConfig& config) {
   section.read("out_of_view_frames", config.out_of_view_frames);
   section.read("min_area_m2", config.min_area_m2);
   section.read("sample_cell_m", config.sample_cell_m);
-  section.read("samples_per_cell", config.samples_per_cell);
   section.read("colour_every_n_frames", config.colour_every_n_frames);
-  section.read("recency_half_life_frames", config.recency_half_life_frames);
+  section.read("colour_depth_tolerance_m", config.colour_depth_tolerance_m);
+  section.read("colour_depth_tolerance_per_m2", config.colour_depth_tolerance_per_m2);
+  section.read("colour_edge_margin_px", config.colour_edge_margin_px);
+  section.read("exposure_compensation", config.exposure_compensation);
   if (config.max_normal_angle_deg <= 0.0 || config.max_offset_m <= 0.0 || config.cell_m <= 0.0) {
     throw core::ConfigError(
         "patches: max_normal_angle_deg, max_offset_m and cell_m must be positive");
@@ -50,11 +52,13 @@ void readConfig(const core::ConfigSection& section, PatchMapConfig& config) {
     throw core::ConfigError(
         "patches: stable_frames and out_of_view_frames must be at least 1, max_growth at least 0");
   }
-  if (config.min_area_m2 < 0.0 || config.sample_cell_m <= 0.0 || config.samples_per_cell < 1 ||
-      config.colour_every_n_frames < 1 || config.recency_half_life_frames < 0.0) {
+  if (config.min_area_m2 < 0.0 || config.sample_cell_m <= 0.0 ||
+      config.colour_every_n_frames < 1 || config.colour_depth_tolerance_m <= 0.0 ||
+      config.colour_depth_tolerance_per_m2 < 0.0 || config.colour_edge_margin_px < 0) {
     throw core::ConfigError(
-        "patches: min_area_m2 and recency_half_life_frames must be at least 0, sample_cell_m "
-        "positive, samples_per_cell and colour_every_n_frames at least 1");
+        "patches: min_area_m2, colour_depth_tolerance_per_m2 and colour_edge_margin_px must be "
+        "at least 0, sample_cell_m and colour_depth_tolerance_m positive, colour_every_n_frames "
+        "at least 1");
   }
 }
 

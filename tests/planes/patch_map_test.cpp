@@ -236,7 +236,7 @@ TEST(PatchLifecycle, TinyPatchesAreNeverFinalized) {
 }
 
 // Colour samples of a rendered checkerboard plane carry the board's colour at their position,
-// and each 5 mm cell holds at most two of them.
+// one blended sample per 3.5 mm cell.
 TEST(PatchColours, SamplesFromAFrameMatchTheColourOnThePlane) {
   const Eigen::Vector3d n = Eigen::Vector3d(0.1, -0.2, -1.0).normalized();
   const core::Isometry T_W_C = core::Isometry::Identity();
@@ -250,8 +250,9 @@ TEST(PatchColours, SamplesFromAFrameMatchTheColourOnThePlane) {
   const Patch& patch = map.patches().front();
   const auto samples = patch.samples.all();
   ASSERT_GT(samples.size(), 100000u);
-  // 5 mm cells over the patch's area, two samples each, bound the count and the memory.
-  EXPECT_LE(static_cast<double>(samples.size()), 2.0 * 1.2 * map.areaM2(patch) / 25e-6);
+  // 3.5 mm cells over the patch's area, one sample each, bound the count and the memory.
+  const double cell = PatchMapConfig{}.sample_cell_m;
+  EXPECT_LE(static_cast<double>(samples.size()), 1.2 * map.areaM2(patch) / (cell * cell));
   std::size_t matching = 0;
   for (const ColourSample& s : samples) {
     const Eigen::Vector3d X = patch.origin + s.u * patch.u_axis + s.v * patch.v_axis;

@@ -35,7 +35,11 @@ struct ViewEvaluationOptions {
   // with z^2): where something stands in front of the patch, the patch is not what was seen.
   double depth_tolerance_m = 0.02;
   double depth_tolerance_per_m2 = 0.005;
-  std::size_t min_pixels = 500;  // views with fewer common pixels are not scored
+  // Pixels within this many pixels of one that fails the depth test are not compared either:
+  // at a depth discontinuity a real sensor's colour and depth disagree by a few pixels, so the
+  // captured colour there may belong to the other surface (tessera eval --edge-margin).
+  int edge_margin_px = 2;
+  std::size_t min_pixels = 500;    // views with fewer common pixels are not scored
   std::filesystem::path save_dir;  // non-empty: render | captured | difference PNGs
   int save_views = 4;
 };

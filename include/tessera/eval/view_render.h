@@ -17,10 +17,10 @@ namespace tessera::eval {
 struct RenderMesh {
   std::vector<Eigen::Vector3f> vertices;
   std::vector<Eigen::Vector3i> triangles;
-  std::vector<Eigen::Vector3f> colours;    // vertex-coloured: RGB in [0, 255] per vertex
-  std::vector<Eigen::Vector2f> uvs;        // textured: (s, t) per triangle corner, OBJ convention
-  std::vector<int> texture_of;             // textured: per triangle, index into textures or -1
-  std::vector<cv::Mat> textures;           // CV_8UC4 RGBA; texels with alpha 0 cover nothing
+  std::vector<Eigen::Vector3f> colours;  // vertex-coloured: RGB in [0, 255] per vertex
+  std::vector<Eigen::Vector2f> uvs;      // textured: (s, t) per triangle corner, OBJ convention
+  std::vector<int> texture_of;           // textured: per triangle, index into textures or -1
+  std::vector<cv::Mat> textures;         // CV_8UC4 RGBA; texels with alpha 0 cover nothing
   bool textured() const { return !texture_of.empty(); }
 };
 

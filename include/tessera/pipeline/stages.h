@@ -91,6 +91,7 @@ struct FusedFrame {
   std::size_t planes_detected = 0;
   std::size_t patches_live = 0;
   std::size_t patches_finalized = 0;
+  std::optional<Eigen::Vector3f> colour_gain;  // the frame's exposure gain, when it gave colour
   std::vector<planes::PatchEvent> patch_events;
   // A copy of each patch finalized in this frame, for the texturing stage.
   std::vector<planes::PatchSnapshot> finalized_patches;
@@ -170,8 +171,8 @@ class PlaneStage {
   // more than 5 cm or 3 degrees from since the last one sampled.
   bool wantsColours(std::uint64_t index, const core::Isometry& T_W_C) const;
   // Colours of the regions that went to patches `ids`; on a frame not wanted for colour, only
-  // for patches that have hardly any yet.
-  void sampleColours(const core::Frame& frame, const planes::PlaneDetection& detection,
+  // for patches that have hardly any yet. Returns the frame's exposure gain (PatchMap).
+  std::optional<Eigen::Vector3f> sampleColours(const core::Frame& frame, const planes::PlaneDetection& detection,
                      const core::Isometry& T_W_C, std::vector<int> ids);
 
   planes::PlaneDetector detector_;

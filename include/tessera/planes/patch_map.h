@@ -7,6 +7,7 @@
 // higher version of the same id.
 #include <cstddef>
 #include <deque>
+#include <optional>
 #include <set>
 #include <utility>
 #include <vector>
@@ -33,16 +34,26 @@ struct PatchMapConfig {
   double max_growth = 0.02;
   int out_of_view_frames = 60;
   double min_area_m2 = 0.1;
-  // Colour samples: at most samples_per_cell in each sample_cell_m square of the plane.
-  double sample_cell_m = 0.005;
-  int samples_per_cell = 2;
+  // Colour samples: each sample_cell_m square of the plane blends the samples that fall in it.
+  double sample_cell_m = 0.0035;
   // Colours are taken from every N-th frame (and from frames far from the last one sampled):
   // at 30 frames/s neighbouring frames see nearly the same thing, and sampling is the
   // costliest part of the plane stage.
   int colour_every_n_frames = 2;
-  // A sample's weight doubles every recency_half_life_frames frames of the stream, so newer
-  // views win over older ones of equal quality (0: no preference).
-  double recency_half_life_frames = 900.0;
+  // A pixel colours its patch only where the measured depth agrees with the patch's plane
+  // within colour_depth_tolerance_m + colour_depth_tolerance_per_m2 * z^2 (the sensor's noise
+  // grows with z^2): what stands on or in front of the plane (clutter, an occluder) is not its
+  // texture. Pixels within colour_edge_margin_px of a pixel that fails this test (a depth
+  // discontinuity, where colour and depth disagree most) are left out too.
+  double colour_depth_tolerance_m = 0.01;
+  double colour_depth_tolerance_per_m2 = 0.005;
+  int colour_edge_margin_px = 2;
+  // Per-frame gain per channel, estimated against what the patches already hold and applied
+  // before blending (planes/exposure.h); the bitmap is brought back to the mean exposure of
+  // the frames that coloured it. Off by default: it makes a uniform surface uniform, but each
+  // real view keeps its own exposure, and the per-cell mean of the views that saw a cell fits
+  // them better (measured in docs/ARCHITECTURE.md, "Textures on real cameras").
+  bool exposure_compensation = false;
 };
 
 // One detected region in world coordinates.
@@ -65,11 +76,14 @@ struct Patch {
   Eigen::Vector3d v_axis = Eigen::Vector3d::UnitY();
   CellSet cells;
   PointMoments moments;  // of every point ever added, for the least-squares refit
-  ColourSamples samples{0.005, 2};
+  ColourSamples samples{PatchMapConfig{}.sample_cell_m};  // PatchMap sets its configured cell
   // Sum over every coloured pixel of its footprint on the plane (distance / fx, metres), for
   // the texel size that matches how sharply the sensor saw the patch.
   double footprint_sum_m = 0.0;
   std::size_t footprint_pixels = 0;
+  // Sum over every coloured pixel of the log gain its frame was compensated by, per channel:
+  // the patch's texture is brought back to the mean exposure of its views.
+  Eigen::Vector3d log_gain_sum = Eigen::Vector3d::Zero();
 
   // Finalization state.
   int version = 0;  // 0: never finalized; each finalization adds one
@@ -122,10 +136,15 @@ class PatchMap {
 
   // Colours of the frame's pixels in the regions that went to patches `ids` (as add returned
   // them): each pixel's ray meets its patch's plane, weighted by |cos| of the viewing angle
-  // over the squared distance, times `sharpness` (SharpnessGauge) and the recency factor.
-  // Needs rgb registered to depth.
-  void addColours(const core::Frame& frame, const PlaneDetection& detection,
-                  const core::Isometry& T_W_C, const std::vector<int>& ids, double sharpness = 1.0);
+  // over the squared distance, times `sharpness` (SharpnessGauge); only pixels whose measured
+  // depth confirms the plane, away from depth discontinuities. With exposure compensation the
+  // colours are first multiplied by the frame's gain. Needs rgb registered to depth. Returns
+  // the gain applied (1 without compensation; the last frame's when this one overlaps too
+  // little of what the patches hold to estimate its own), or nothing when no pixel gave colour.
+  std::optional<Eigen::Vector3f> addColours(const core::Frame& frame,
+                                            const PlaneDetection& detection,
+                                            const core::Isometry& T_W_C,
+                                            const std::vector<int>& ids, double sharpness = 1.0);
 
   // Closes frame `frame_index` (patches seen in it are the ones add() touched since the last
   // call) and returns the finalizations and retirements it caused.
@@ -160,6 +179,7 @@ class PatchMap {
   std::vector<Patch> patches_;
   std::set<int> seen_this_frame_;
   std::vector<PatchEvent> pending_;  // retirements from merges, reported by endFrame
+  Eigen::Vector3f last_gain_ = Eigen::Vector3f::Ones();
   int next_id_ = 0;
 };
 

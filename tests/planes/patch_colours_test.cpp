@@ -1,0 +1,133 @@
+// Colours on real cameras: blended cells, a frame's exposure gain recovered where it overlaps
+// the patches, and pixels of something in front of a patch kept out of its colours.
+#include <random>
+
+#include <gtest/gtest.h>
+
+#include "support/synthetic_plane.h"
+#include "tessera/planes/colour_samples.h"
+#include "tessera/planes/exposure.h"
+#include "tessera/planes/patch_map.h"
+#include "tessera/texture/bitmap_builder.h"
+
+namespace tessera::planes {
+namespace {
+
+TEST(ColourSamples, ACellBlendsItsSamplesByWeightAtTheirWeightedMeanPosition) {
+  ColourSamples samples(0.01);
+  samples.add(0.002F, 0.002F, {100, 0, 200}, 1.0F);
+  samples.add(0.006F, 0.004F, {200, 100, 0}, 3.0F);
+  ASSERT_EQ(samples.size(), 1u);
+  const std::vector<ColourSample> all = samples.all();
+  ASSERT_EQ(all.size(), 1u);
+  EXPECT_EQ(all[0].rgb, (std::array<std::uint8_t, 3>{175, 75, 50}));
+  EXPECT_NEAR(all[0].u, 0.005F, 0.0001F);
+  EXPECT_NEAR(all[0].v, 0.0035F, 0.0001F);
+  EXPECT_NEAR(std::exp(all[0].score), 4.0F, 1e-4F);
+  EXPECT_TRUE(samples.colourAt(0.009F, 0.001F).has_value());
+  EXPECT_FALSE(samples.colourAt(0.011F, 0.001F).has_value());
+  EXPECT_FALSE(samples.colourAt(-0.001F, 0.001F).has_value());
+  // 32 x 32 cells of 12 bytes are allocated as a tile is touched.
+  EXPECT_EQ(samples.bytes(), 32u * 32u * 12u);
+}
+
+TEST(Exposure, GainIsRecoveredDespiteOutliersAndClippedPixels) {
+  std::mt19937 random(3);
+  std::uniform_real_distribution<float> level(50.0F, 200.0F);
+  std::normal_distribution<float> noise(0.0F, 2.0F);
+  const Eigen::Vector3f gain(1.25F, 0.9F, 1.1F);
+  std::vector<ColourPair> pairs;
+  for (int i = 0; i < 3000; ++i) {
+    const Eigen::Vector3f reference(level(random), level(random), level(random));
+    Eigen::Vector3f observed = reference.cwiseQuotient(gain);
+    for (int c = 0; c < 3; ++c) observed[c] += noise(random);
+    if (i % 5 == 0) observed = Eigen::Vector3f(250.0F, 30.0F, 90.0F);  // a highlight, misplaced
+    pairs.push_back({observed, reference});
+  }
+  const auto estimated = estimateGain(pairs);
+  ASSERT_TRUE(estimated.has_value());
+  EXPECT_NEAR((*estimated)[0], 1.25F, 0.01F);
+  EXPECT_NEAR((*estimated)[1], 0.9F, 0.01F);
+  EXPECT_NEAR((*estimated)[2], 1.1F, 0.01F);
+  EXPECT_FALSE(estimateGain({pairs.begin(), pairs.begin() + 50}).has_value());  // too few
+}
+
+// A textured wall 2 m away seen from five poses, each frame with its own known exposure: the
+// gain the map applies to frame k is its exposure relative to the first frame's.
+TEST(Exposure, KnownPerFrameGainsOfARenderedSequenceAreRecovered) {
+  const std::vector<Eigen::Vector3f> exposures = {{1.0F, 1.0F, 1.0F},
+                                                  {0.8F, 0.85F, 0.75F},
+                                                  {1.1F, 1.05F, 1.1F},
+                                                  {0.7F, 0.7F, 0.8F},
+                                                  {0.9F, 1.1F, 1.0F}};
+  PatchMapConfig config;
+  config.exposure_compensation = true;
+  PatchMap map(config);
+  const PlaneDetector detector(PlaneDetectorConfig{});
+  for (std::size_t k = 0; k < exposures.size(); ++k) {
+    core::Isometry T_W_C = core::Isometry::Identity();
+    T_W_C.translation() = Eigen::Vector3d(0.1 * static_cast<double>(k), 0.02, 0.0);
+    core::Frame frame =
+        test::renderPlane(test::kinectIntrinsics(), T_W_C, Eigen::Vector3d(0, 0, -1), -2.0);
+    // The board's light squares (220, 200, 180) get the frame's exposure; its dark ones are too
+    // dark to measure gain with and stay as they are.
+    frame.rgb.forEach<cv::Vec3b>([&](cv::Vec3b& rgb, const int*) {
+      if (rgb[0] < 100) return;
+      for (int c = 0; c < 3; ++c)
+        rgb[c] = cv::saturate_cast<std::uint8_t>(exposures[k][c] * rgb[c]);
+    });
+    const PlaneDetection detection = detector.detect(frame);
+    const auto ids = map.add(observationsOf(frame, detection, T_W_C));
+    const auto gain = map.addColours(frame, detection, T_W_C, ids);
+    ASSERT_TRUE(gain.has_value()) << "frame " << k;
+    for (int c = 0; c < 3; ++c) {
+      // Colours are 8-bit: a gain is known to about one grey level in 200.
+      EXPECT_NEAR((*gain)[c], exposures[0][c] / exposures[k][c], 0.015F) << "frame " << k;
+    }
+  }
+}
+
+// A wall 2 m away with a red box face 1.2 m in front of it. Even when the plane detector puts
+// the box's pixels into the wall's region, the measured depth says they are not the wall, so
+// none of them colours it, and the wall's bitmap shows no red.
+TEST(PatchColours, PixelsOfAnOccluderNeverReachThePatchBehindIt) {
+  const core::Isometry T_W_C = core::Isometry::Identity();
+  core::Frame wall =
+      test::renderPlane(test::kinectIntrinsics(), T_W_C, Eigen::Vector3d(0, 0, -1), -2.0);
+  wall.rgb.setTo(cv::Scalar(200, 200, 200));
+  const PlaneDetector detector(PlaneDetectorConfig{});
+  PatchMap map(PatchMapConfig{});
+  const PlaneDetection clean = detector.detect(wall);
+  ASSERT_EQ(clean.planes.size(), 1u);
+  const std::vector<int> ids = map.add(observationsOf(wall, clean, T_W_C));
+
+  core::Frame occluded = wall;
+  const core::Intrinsics& k = occluded.intrinsics;
+  for (int v = 0; v < k.height; ++v) {
+    for (int u = 0; u < k.width; ++u) {
+      const double x = (u - k.cx) / k.fx * 0.8, y = (v - k.cy) / k.fy * 0.8;
+      if (std::abs(x) > 0.2 || std::abs(y) > 0.2) continue;
+      occluded.depth_mm.at<std::uint16_t>(v, u) = 800;
+      occluded.rgb.at<cv::Vec3b>(v, u) = cv::Vec3b(255, 0, 0);
+    }
+  }
+  PlaneDetection everything_wall = clean;
+  everything_wall.labels.setTo(0);  // the box's pixels too
+  map.addColours(occluded, everything_wall, T_W_C, ids);
+
+  const Patch& patch = map.patches().front();
+  const std::vector<ColourSample> samples = patch.samples.all();
+  ASSERT_GT(samples.size(), 10000u);
+  for (const ColourSample& sample : samples) {
+    ASSERT_EQ(sample.rgb, (std::array<std::uint8_t, 3>{200, 200, 200}))
+        << "at (" << sample.u << ", " << sample.v << ")";
+  }
+  const texture::PatchBitmap bitmap = texture::buildBitmap(map.snapshot(patch), {});
+  ASSERT_GT(bitmap.observed, 1000u);
+  cv::Mat red;
+  cv::inRange(bitmap.image, cv::Scalar(230, 0, 0), cv::Scalar(255, 180, 180), red);
+  EXPECT_EQ(cv::countNonZero(red), 0);
+}
+
+}  // namespace
+}  // namespace tessera::planes
