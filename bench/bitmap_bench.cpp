@@ -1,5 +1,5 @@
 // Bitmap building time per square metre of patch, on one core: a synthetic patch coloured as
-// the plane stage colours one (two samples in every 5 mm cell, at random places in it), built
+// the plane stage colours one (one blended sample in every 3.5 mm cell, somewhere in it), built
 // at a given texel size with the default settings, best view, and fewer neighbours.
 //
 // With --run OUT (a tessera run's output folder), it also compares, for each finalized patch of
@@ -27,19 +27,17 @@ tessera::planes::PatchSnapshot syntheticPatch(double side_m, std::uint32_t seed)
   std::mt19937 random(seed);
   std::uniform_real_distribution<float> unit(0.0F, 1.0F);
   std::uniform_int_distribution<int> level(0, 255);
-  const double cell = 0.005;
+  const double cell = tessera::planes::PatchMapConfig{}.sample_cell_m;
   const int cells = static_cast<int>(side_m / cell);
   for (int i = 0; i < cells; ++i) {
     for (int j = 0; j < cells; ++j) {
-      for (int k = 0; k < 2; ++k) {
-        tessera::planes::ColourSample s;
-        s.u = (static_cast<float>(i) + unit(random)) * static_cast<float>(cell);
-        s.v = (static_cast<float>(j) + unit(random)) * static_cast<float>(cell);
-        s.rgb = {static_cast<std::uint8_t>(level(random)), static_cast<std::uint8_t>(level(random)),
-                 static_cast<std::uint8_t>(level(random))};
-        s.score = -unit(random);
-        patch.samples.push_back(s);
-      }
+      tessera::planes::ColourSample s;
+      s.u = (static_cast<float>(i) + unit(random)) * static_cast<float>(cell);
+      s.v = (static_cast<float>(j) + unit(random)) * static_cast<float>(cell);
+      s.rgb = {static_cast<std::uint8_t>(level(random)), static_cast<std::uint8_t>(level(random)),
+               static_cast<std::uint8_t>(level(random))};
+      s.score = -unit(random);
+      patch.samples.push_back(s);
     }
   }
   return patch;

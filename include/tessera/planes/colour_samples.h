@@ -24,7 +24,7 @@ struct ColourSample {
   std::array<std::uint8_t, 3> rgb{};
   // Natural log of the sample's weight (how close, frontal and sharp its views were; for a
   // blended cell, of the sum of its samples' weights). A log, so that weights of very
-  // different size compare as exp(score_a - score_b). kEmpty marks an empty cell.
+  // different size compare as exp(score_a - score_b).
   float score = kEmpty;
 };
 
