@@ -102,8 +102,8 @@ void findOverlays(std::vector<TruthPlane>& planes, const PlaneEvaluationOptions&
       if (&big == &small || big.area_m2 <= small.area_m2) continue;
       if (small.plane.normal.dot(big.plane.normal) < cos_bound) continue;
       if (std::abs(small.plane.offset - big.plane.offset) > options.max_offset_m) continue;
-      const bool corners_inside = std::all_of(
-          small.polygon.begin(), small.polygon.end(), [&](const Eigen::Vector2d& uv) {
+      const bool corners_inside =
+          std::all_of(small.polygon.begin(), small.polygon.end(), [&](const Eigen::Vector2d& uv) {
             return inside(big.plane.uvOf(small.plane.pointAt(uv)), big.polygon);
           });
       if (corners_inside) small.parent = static_cast<int>(j);
@@ -113,8 +113,8 @@ void findOverlays(std::vector<TruthPlane>& planes, const PlaneEvaluationOptions&
 
 // Marks, in each plane's raster, the cells the camera saw it at (nearest surface along each
 // ray, within the depth range), from the ground-truth poses.
-void markSeen(std::vector<TruthPlane>& planes, const nlohmann::json& truth,
-              const Trajectory& poses, const PlaneEvaluationOptions& options) {
+void markSeen(std::vector<TruthPlane>& planes, const nlohmann::json& truth, const Trajectory& poses,
+              const PlaneEvaluationOptions& options) {
   const auto& k = truth.at("intrinsics");
   const double fx = k.at("fx"), fy = k.at("fy"), cx = k.at("cx"), cy = k.at("cy");
   const int width = k.at("width"), height = k.at("height");
@@ -128,7 +128,8 @@ void markSeen(std::vector<TruthPlane>& planes, const nlohmann::json& truth,
     const Eigen::Vector3d o = T_W_C.translation();
     for (int y = 0; y < height; y += options.pixel_step) {
       for (int x = 0; x < width; x += options.pixel_step) {
-        const Eigen::Vector3d ray = T_W_C.linear() * Eigen::Vector3d((x - cx) / fx, (y - cy) / fy, 1);
+        const Eigen::Vector3d ray =
+            T_W_C.linear() * Eigen::Vector3d((x - cx) / fx, (y - cy) / fy, 1);
         double nearest = std::numeric_limits<double>::infinity();
         int hit = -1;
         for (std::size_t i = 0; i < planes.size(); ++i) {
@@ -142,10 +143,10 @@ void markSeen(std::vector<TruthPlane>& planes, const nlohmann::json& truth,
           hit = static_cast<int>(i);
         }
         if (hit < 0 || nearest < min_depth || nearest > options.max_depth_m) continue;
-        TruthPlane& target = planes[static_cast<std::size_t>(
-            planes[static_cast<std::size_t>(hit)].parent >= 0
-                ? planes[static_cast<std::size_t>(hit)].parent
-                : hit)];
+        TruthPlane& target =
+            planes[static_cast<std::size_t>(planes[static_cast<std::size_t>(hit)].parent >= 0
+                                                ? planes[static_cast<std::size_t>(hit)].parent
+                                                : hit)];
         const Eigen::Vector2d cell =
             (target.plane.uvOf(o + nearest * ray) - target.grid_min) / options.cell_m;
         const int c = static_cast<int>(cell.x()), r = static_cast<int>(cell.y());
@@ -221,8 +222,7 @@ PlaneEvaluation evaluatePlanes(const nlohmann::json& truth, const Trajectory& tr
       const RunPatch& patch = patches[i];
       const double cos_angle = std::min(1.0, std::abs(patch.normal_W.dot(plane.plane.normal)));
       const double angle_deg = std::acos(cos_angle) * 180.0 / M_PI;
-      const double offset =
-          std::abs(plane.plane.normal.dot(patch.centroid_W) - plane.plane.offset);
+      const double offset = std::abs(plane.plane.normal.dot(patch.centroid_W) - plane.plane.offset);
       if (angle_deg > options.max_normal_deg || offset > options.max_offset_m) continue;
       // The patch's cells in this plane's raster.
       cv::Mat covered = cv::Mat::zeros(plane.seen.size(), CV_8UC1);
@@ -230,7 +230,8 @@ PlaneEvaluation evaluatePlanes(const nlohmann::json& truth, const Trajectory& tr
         for (int c = 0; c < covered.cols; ++c) {
           const Eigen::Vector3d X_gt = plane.plane.pointAt(
               plane.grid_min + options.cell_m * Eigen::Vector2d(c + 0.5, r + 0.5));
-          if (covers(patch, patch.plane.uvOf(T_est_gt * X_gt))) covered.at<std::uint8_t>(r, c) = 255;
+          if (covers(patch, patch.plane.uvOf(T_est_gt * X_gt)))
+            covered.at<std::uint8_t>(r, c) = 255;
         }
       }
       const int covered_cells = cv::countNonZero(covered);
@@ -258,15 +259,14 @@ PlaneEvaluation evaluatePlanes(const nlohmann::json& truth, const Trajectory& tr
     result.planes_found += entry.found ? 1 : 0;
     result.planes.push_back(entry);
   }
-  result.patches_matched = static_cast<std::size_t>(std::count(matched.begin(), matched.end(), true));
-  result.recall = result.planes_counted > 0
-                      ? static_cast<double>(result.planes_found) /
-                                static_cast<double>(result.planes_counted)
-                      : 0.0;
-  result.precision = result.patches > 0
-                         ? static_cast<double>(result.patches_matched) /
-                                   static_cast<double>(result.patches)
-                         : 0.0;
+  result.patches_matched =
+      static_cast<std::size_t>(std::count(matched.begin(), matched.end(), true));
+  result.recall = result.planes_counted > 0 ? static_cast<double>(result.planes_found) /
+                                                  static_cast<double>(result.planes_counted)
+                                            : 0.0;
+  result.precision = result.patches > 0 ? static_cast<double>(result.patches_matched) /
+                                              static_cast<double>(result.patches)
+                                        : 0.0;
   return result;
 }
 

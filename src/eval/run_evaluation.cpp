@@ -143,8 +143,8 @@ nlohmann::json evaluateRun(const std::filesystem::path& run_dir,
     try {
       planes = evaluatePlanes(gt, truth_poses, readJson(patches_path), T_gt_est);
     } catch (const core::Error& e) {
-      throw core::Error(fmt::format("{} against {}: {}", patches_path.string(),
-                                    ground_truth.string(), e.what()));
+      throw core::Error(
+          fmt::format("{} against {}: {}", patches_path.string(), ground_truth.string(), e.what()));
     }
     addPlaneFigures(planes, figures);
   }
@@ -182,6 +182,12 @@ nlohmann::json evaluateRunViews(const std::filesystem::path& run_dir, core::Fram
   const Trajectory poses = readTumTrajectory(run_dir / "trajectory.txt");
   const ViewEvaluation views =
       evaluateViews({{"patches", &patches}, {"mesh", &mesh}}, frames, poses, options);
+  if (views.views.empty()) {
+    throw core::Error(fmt::format(
+        "{}: no view could be scored: none of its frames has a pose in {} with patches in "
+        "view (is it the source this run read?)",
+        frames.name(), (run_dir / "trajectory.txt").string()));
+  }
   nlohmann::json figures = viewFigures(views);
   figures["view_frames_source"] = frames.name();
   mergeIntoReport(report_path, report, figures);

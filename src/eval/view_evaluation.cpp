@@ -67,10 +67,10 @@ void saveComparison(const cv::Mat& rendered, const cv::Mat& captured, const cv::
 }
 
 // Spreads `wanted` views evenly over `total` candidates: every stride-th is taken.
-std::size_t strideFor(std::optional<std::size_t> total, int wanted) {
-  if (!total || wanted <= 0) return 1;
-  return std::max<std::size_t>(
-      1, (*total + static_cast<std::size_t>(wanted) - 1) / static_cast<std::size_t>(wanted));
+std::size_t strideFor(std::size_t total, int wanted) {
+  if (wanted <= 0) return 1;
+  const auto n = static_cast<std::size_t>(wanted);
+  return std::max<std::size_t>(1, (total + n - 1) / n);
 }
 
 }  // namespace
@@ -131,17 +131,24 @@ ViewEvaluation evaluateViews(const std::vector<ViewModel>& models, core::FrameSo
   if (models.empty()) throw core::Error("view evaluation: no model to render");
   ViewEvaluation evaluation;
   for (const ViewModel& model : models) evaluation.models.push_back(model.name);
-  if (!options.save_dir.empty()) std::filesystem::create_directories(options.save_dir);
+  if (!options.save_dir.empty()) {
+    std::error_code error;
+    std::filesystem::create_directories(options.save_dir, error);
+    if (error) {
+      throw core::Error(
+          fmt::format("{}: cannot be created: {}", options.save_dir.string(), error.message()));
+    }
+  }
 
-  // Held-out frames are every holdout_every-th; the rest are training frames.
-  const std::optional<std::size_t> total = frames.frameCount();
-  std::optional<std::size_t> held_out_total;
-  if (total)
-    held_out_total =
+  // Held-out frames are every holdout_every-th, the rest training frames; each kind is spread
+  // evenly over the recording when its length is known, else every frame is scored.
+  std::size_t train_stride = 1, held_out_stride = 1;
+  if (const std::optional<std::size_t> total = frames.frameCount()) {
+    const std::size_t held_out =
         options.holdout_every > 1 ? *total / static_cast<std::size_t>(options.holdout_every) : 0;
-  const std::size_t train_stride =
-      strideFor(total ? std::optional(*total - *held_out_total) : std::nullopt, options.max_views);
-  const std::size_t held_out_stride = strideFor(held_out_total, options.max_views);
+    train_stride = strideFor(*total - held_out, options.max_views);
+    held_out_stride = strideFor(held_out, options.max_views);
+  }
   std::size_t seen[2] = {0, 0};  // training, held-out frames met so far
   int saved = 0;
   const int save_every = std::max(1, options.max_views / std::max(1, options.save_views));

@@ -1,0 +1,166 @@
+// PatchMap::addColours: colour samples from one frame for the patches its regions went to
+// (docs/ARCHITECTURE.md, "Textures: bitmaps of the finalized patches").
+#include <algorithm>
+#include <cmath>
+
+#include <opencv2/imgproc.hpp>
+
+#include "tessera/planes/exposure.h"
+#include "tessera/planes/patch_map.h"
+
+namespace tessera::planes {
+
+namespace {
+
+// Per region of a frame: its patch's plane in the camera frame (n_C . X_C = d_C) and the
+// camera-frame position and axes of the patch's (u, v) frame, so each pixel costs a few
+// multiplies.
+struct ColourTarget {
+  Patch* patch = nullptr;
+  Eigen::Vector3f n_C, origin_C, u_C, v_C;
+  float d_C = 0.0F;
+};
+
+// What pass one learns of a pixel that sees its patch: where its ray meets the plane, its view
+// weight and its distance.
+struct PlanePixel {
+  float u = 0.0F, v = 0.0F, weight = 0.0F, distance = 0.0F;
+};
+
+// Whether the colour around (x, y) is nearly uniform: only there does a pixel compared with
+// what the patch holds at its position measure exposure, not a few millimetres of
+// misregistration across an edge.
+bool smooth(const cv::Mat& rgb, int x, int y) {
+  constexpr int kMaxStep = 12;  // grey levels between the pixels two apart, any channel
+  if (x < 2 || y < 2 || x + 2 >= rgb.cols || y + 2 >= rgb.rows) return false;
+  const cv::Vec3b& c = rgb.at<cv::Vec3b>(y, x);
+  for (const auto& [dx, dy] : {std::pair{-2, 0}, {2, 0}, {0, -2}, {0, 2}}) {
+    const cv::Vec3b& n = rgb.at<cv::Vec3b>(y + dy, x + dx);
+    for (int ch = 0; ch < 3; ++ch) {
+      if (std::abs(static_cast<int>(n[ch]) - static_cast<int>(c[ch])) > kMaxStep) return false;
+    }
+  }
+  return true;
+}
+
+}  // namespace
+
+std::optional<Eigen::Vector3f> PatchMap::addColours(const core::Frame& frame,
+                                                    const PlaneDetection& detection,
+                                                    const core::Isometry& T_W_C,
+                                                    const std::vector<int>& ids, double sharpness) {
+  const core::Intrinsics& k = frame.intrinsics;
+  if (frame.colour_camera || frame.rgb.type() != CV_8UC3 || frame.rgb.cols != k.width ||
+      frame.rgb.rows != k.height || frame.depth_mm.size() != frame.rgb.size()) {
+    return std::nullopt;  // colour not registered pixel for pixel to depth
+  }
+  const core::Isometry T_C_W = T_W_C.inverse();
+  std::vector<ColourTarget> targets(ids.size());
+  bool any = false;
+  for (std::size_t r = 0; r < ids.size(); ++r) {
+    auto it = std::find_if(patches_.begin(), patches_.end(),
+                           [&](const Patch& p) { return p.id == ids[r]; });
+    if (it == patches_.end()) continue;
+    ColourTarget& target = targets[r];
+    target.patch = &*it;
+    target.n_C = (T_C_W.linear() * it->normal).cast<float>();
+    target.d_C = static_cast<float>(it->offset - it->normal.dot(T_W_C.translation()));
+    target.origin_C = (T_C_W * it->origin).cast<float>();
+    target.u_C = (T_C_W.linear() * it->u_axis).cast<float>();
+    target.v_C = (T_C_W.linear() * it->v_axis).cast<float>();
+    any = true;
+  }
+  if (!any) return std::nullopt;
+
+  // Pass one: the pixels whose measured depth confirms their patch's plane.
+  const int scale = detection.scale;
+  cv::Mat sees_plane = cv::Mat::zeros(frame.rgb.size(), CV_8UC1);
+  cv::Mat plane_pixels(frame.rgb.size(), CV_32FC4);
+  const auto tolerance_m = static_cast<float>(config_.colour_depth_tolerance_m);
+  const auto tolerance_per_m2 = static_cast<float>(config_.colour_depth_tolerance_per_m2);
+  for (int y = 0; y < frame.rgb.rows; ++y) {
+    const auto* label = detection.labels.ptr<std::uint8_t>(y / scale);
+    const auto* depth = frame.depth_mm.ptr<std::uint16_t>(y);
+    auto* sees = sees_plane.ptr<std::uint8_t>(y);
+    auto* out = plane_pixels.ptr<PlanePixel>(y);
+    const auto ray_y = static_cast<float>((y - k.cy) / k.fy);
+    for (int x = 0; x < frame.rgb.cols; ++x) {
+      const std::uint8_t l = label[x / scale];
+      if (l >= targets.size() || targets[l].patch == nullptr || depth[x] == 0) continue;
+      const ColourTarget& target = targets[l];
+      const Eigen::Vector3f ray(static_cast<float>((x - k.cx) / k.fx), ray_y, 1.0F);
+      const float along = target.n_C.dot(ray);
+      if (std::abs(along) < 1e-6F) continue;
+      const float z = target.d_C / along;  // the ray meets the plane at depth z
+      if (z <= 0.0F) continue;
+      const float measured = static_cast<float>(depth[x]) * 1e-3F;
+      if (std::abs(measured - z) > tolerance_m + tolerance_per_m2 * z * z) continue;
+      const Eigen::Vector3f offset = z * ray - target.origin_C;
+      const float ray_norm = ray.norm();
+      const float distance = z * ray_norm;
+      out[x] = {offset.dot(target.u_C), offset.dot(target.v_C),
+                std::abs(along) / ray_norm / (distance * distance), distance};
+      sees[x] = 255;
+    }
+  }
+  if (const int margin = config_.colour_edge_margin_px; margin > 0) {
+    cv::erode(sees_plane, sees_plane,
+              cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * margin + 1, 2 * margin + 1)));
+  }
+
+  // The frame's gain against what the patches hold (every 2nd pixel each way is plenty).
+  Eigen::Vector3f gain = Eigen::Vector3f::Ones();
+  if (config_.exposure_compensation) {
+    std::vector<ColourPair> pairs;
+    for (int y = 0; y < frame.rgb.rows; y += 2) {
+      const auto* label = detection.labels.ptr<std::uint8_t>(y / scale);
+      const auto* sees = sees_plane.ptr<std::uint8_t>(y);
+      const auto* rgb = frame.rgb.ptr<cv::Vec3b>(y);
+      const auto* pixel = plane_pixels.ptr<PlanePixel>(y);
+      for (int x = 0; x < frame.rgb.cols; x += 2) {
+        if (sees[x] == 0 || !smooth(frame.rgb, x, y)) continue;
+        const auto held = targets[label[x / scale]].patch->samples.colourAt(pixel[x].u, pixel[x].v);
+        if (held) pairs.push_back({Eigen::Vector3f(rgb[x][0], rgb[x][1], rgb[x][2]), *held});
+      }
+    }
+    if (const auto estimated = estimateGain(pairs)) last_gain_ = *estimated;
+    gain = last_gain_;
+  }
+
+  // Pass two: the samples, weighted by their view and the frame's sharpness.
+  const auto frame_weight = static_cast<float>(std::max(sharpness, 1e-6));
+  std::vector<std::size_t> pixels_of(targets.size(), 0);
+  std::vector<double> distance_of(targets.size(), 0.0);
+  for (int y = 0; y < frame.rgb.rows; ++y) {
+    const auto* label = detection.labels.ptr<std::uint8_t>(y / scale);
+    const auto* sees = sees_plane.ptr<std::uint8_t>(y);
+    const auto* rgb = frame.rgb.ptr<cv::Vec3b>(y);
+    const auto* pixel = plane_pixels.ptr<PlanePixel>(y);
+    for (int x = 0; x < frame.rgb.cols; ++x) {
+      if (sees[x] == 0) continue;
+      const std::uint8_t l = label[x / scale];
+      std::array<std::uint8_t, 3> colour;
+      for (int c = 0; c < 3; ++c) {
+        colour[static_cast<std::size_t>(c)] =
+            cv::saturate_cast<std::uint8_t>(gain[c] * static_cast<float>(rgb[x][c]));
+      }
+      targets[l].patch->samples.add(pixel[x].u, pixel[x].v, colour, pixel[x].weight * frame_weight);
+      ++pixels_of[l];
+      distance_of[l] += pixel[x].distance;
+    }
+  }
+  const Eigen::Vector3d log_gain = gain.cast<double>().array().log();
+  bool sampled = false;
+  for (std::size_t l = 0; l < targets.size(); ++l) {
+    if (pixels_of[l] == 0) continue;
+    Patch& patch = *targets[l].patch;
+    patch.footprint_sum_m += distance_of[l] / k.fx;
+    patch.footprint_pixels += pixels_of[l];
+    patch.log_gain_sum += static_cast<double>(pixels_of[l]) * log_gain;
+    sampled = true;
+  }
+  if (!sampled) return std::nullopt;
+  return gain;
+}
+
+}  // namespace tessera::planes
