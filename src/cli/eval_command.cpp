@@ -41,6 +41,11 @@ CLI::App* addEvalCommand(CLI::App& app, EvalArguments& args) {
                    "likewise)")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
+  eval->add_option("--edge-margin", args.edge_margin_px,
+                   "With --frames: pixels within this many pixels of a depth discontinuity (a "
+                   "pixel whose captured depth disagrees with the map) are not compared")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
   addSourceOptions(*eval, args.source_args);
   return eval;
 }
@@ -58,6 +63,7 @@ int evalCommand(const EvalArguments& args) {
       const std::unique_ptr<core::FrameSource> source = openSource(args.frames, args.source_args);
       eval::ViewEvaluationOptions options;
       options.max_views = args.max_views;
+      options.edge_margin_px = args.edge_margin_px;
       options.save_dir = args.save_dir;
       printFigures(eval::evaluateRunViews(args.run_dir, *source, options));
     }

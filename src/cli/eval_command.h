@@ -5,6 +5,7 @@
 #include <CLI/CLI.hpp>
 
 #include "source_factory.h"
+#include "tessera/eval/view_evaluation.h"
 
 namespace tessera::cli {
 
@@ -14,6 +15,7 @@ struct EvalArguments {
   std::string frames;  // --frames: the source whose captured frames the map is rendered into
   std::string save_dir;
   int max_views = 20;
+  int edge_margin_px = eval::ViewEvaluationOptions{}.edge_margin_px;
   SourceArguments source_args;
 };
 
