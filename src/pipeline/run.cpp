@@ -168,13 +168,13 @@ void writeReport(const RunSummary& summary, const std::filesystem::path& path) {
       {"bitmap_ms_per_m2", summary.bitmap_ms_per_m2},
   };
   report["ate_m"] = summary.ate ? json(summary.ate->rmse_m) : json(nullptr);
+  report["ate_max_m"] = summary.ate ? json(summary.ate->max_m) : json(nullptr);
+  report["ate_pairs"] = summary.ate ? summary.ate->pairs : 0;
   // View PSNR needs the captured frames again: `tessera eval RUN_DIR --frames SOURCE` fills it.
   for (const char* key : {"view_psnr_mean", "view_psnr_baseline_mean", "view_psnr_holdout_mean",
                           "view_psnr_baseline_holdout_mean", "view_pixels"}) {
     report[key] = nullptr;
   }
-  report["ate_max_m"] = summary.ate ? json(summary.ate->max_m) : json(nullptr);
-  report["ate_pairs"] = summary.ate ? summary.ate->pairs : 0;
   const auto optional = [](const std::optional<double>& v) { return v ? json(*v) : json(nullptr); };
   report["frames_delivered"] =
       summary.live ? json(summary.live_stats.frames_delivered) : json(nullptr);

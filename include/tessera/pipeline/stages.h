@@ -76,7 +76,7 @@ struct TrackedFrame {
 struct FusedFrame {
   core::Frame frame;
   bool integrated = false;
-  bool held_out = false;  // left out of fusion and texturing (run --holdout-every)
+  bool held_out = false;                // left out of fusion and texturing (run --holdout-every)
   std::optional<core::Isometry> T_W_C;  // the pose it was fused at
   std::string skip_reason;              // why the frame was not integrated
   std::size_t tsdf_bytes = 0;
@@ -172,8 +172,9 @@ class PlaneStage {
   bool wantsColours(std::uint64_t index, const core::Isometry& T_W_C) const;
   // Colours of the regions that went to patches `ids`; on a frame not wanted for colour, only
   // for patches that have hardly any yet. Returns the frame's exposure gain (PatchMap).
-  std::optional<Eigen::Vector3f> sampleColours(const core::Frame& frame, const planes::PlaneDetection& detection,
-                     const core::Isometry& T_W_C, std::vector<int> ids);
+  std::optional<Eigen::Vector3f> sampleColours(const core::Frame& frame,
+                                               const planes::PlaneDetection& detection,
+                                               const core::Isometry& T_W_C, std::vector<int> ids);
 
   planes::PlaneDetector detector_;
   planes::PatchMap map_;
