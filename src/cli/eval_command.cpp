@@ -4,6 +4,7 @@
 #include <spdlog/spdlog.h>
 
 #include "tessera/core/error.h"
+#include "tessera/eval/reuse_sheet.h"
 #include "tessera/eval/run_evaluation.h"
 
 namespace tessera::cli {
@@ -66,6 +67,11 @@ int evalCommand(const EvalArguments& args) {
       options.edge_margin_px = args.edge_margin_px;
       options.save_dir = args.save_dir;
       printFigures(eval::evaluateRunViews(args.run_dir, *source, options));
+    }
+    // Needs no ground truth: written for every run evaluated.
+    if (const int reuses = eval::writeReuseSheet(args.run_dir); reuses > 0) {
+      fmt::print("reuse sheet: {} ({} reuses)\n",
+                 (std::filesystem::path(args.run_dir) / "reuse_sheet.png").string(), reuses);
     }
     spdlog::info("figures written into {}/report.json", args.run_dir);
     return 0;

@@ -2,8 +2,10 @@
 #include <spdlog/spdlog.h>
 #include <CLI/CLI.hpp>
 
+#include "db_command.h"
 #include "devices_command.h"
 #include "eval_command.h"
+#include "match_command.h"
 #include "record_command.h"
 #include "run_command.h"
 #include "tessera/core/error.h"
@@ -27,6 +29,10 @@ int main(int argc, char** argv) {
   tessera::cli::EvalArguments eval_args;
   CLI::App* eval = tessera::cli::addEvalCommand(app, eval_args);
   CLI::App* devices = tessera::cli::addDevicesCommand(app);
+  tessera::cli::DbArguments db_args;
+  CLI::App* db = tessera::cli::addDbCommand(app, db_args);
+  tessera::cli::MatchArguments match_args;
+  CLI::App* match = tessera::cli::addMatchCommand(app, match_args);
 
   CLI11_PARSE(app, argc, argv);
   try {
@@ -40,5 +46,7 @@ int main(int argc, char** argv) {
   if (synth->parsed()) return tessera::cli::synthCommand(synth_args);
   if (eval->parsed()) return tessera::cli::evalCommand(eval_args);
   if (devices->parsed()) return tessera::cli::devicesCommand();
+  if (db->parsed()) return tessera::cli::dbCommand(*db, db_args);
+  if (match->parsed()) return tessera::cli::matchCommand(match_args);
   return 0;
 }

@@ -40,6 +40,10 @@ CLI::App* addRunCommand(CLI::App& app, RunArguments& args) {
                   "that `tessera eval --frames` scores views the map was not built from (0: none)")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
+  run->add_option("--db", args.db,
+                  "Texture database to match against and grow (SQLite file, created if missing); "
+                  "give the same file to several runs of one place to reuse its textures. "
+                  "Default: OUT/textures.db");
   run->add_option("--record", args.source_args.record_path,
                   "Live devices: also record what the device sends to this .oni file "
                   "(OpenNI2's Recorder, lossless; replays with `tessera run FILE`)");
@@ -65,6 +69,7 @@ int runCommand(const RunArguments& args) {
     run_options.poses =
         args.poses == "gt" ? pipeline::PoseSource::kGroundTruth : pipeline::PoseSource::kTrack;
     run_options.holdout_every = args.holdout_every;
+    if (!args.db.empty()) run_options.db = args.db;
     if (args.source_args.max_frames > 0) run_options.max_frames = args.source_args.max_frames;
     run_options.on_progress = [&progress](const pipeline::Progress& p) { progress.update(p); };
     if (source->isLive()) run_options.stop = &stopOnInterrupt();
@@ -94,6 +99,12 @@ int runCommand(const RunArguments& args) {
       spdlog::info("ATE against the recording's ground truth: {:.1f} mm RMSE over {} poses",
                    summary.ate->rmse_m * 1e3, summary.ate->pairs);
     }
+    spdlog::info(
+        "textures: {} patches textured, {} reuse a stored texture, {} new textures in {}; "
+        "{:.2f} MB before, {:.2f} MB after reuse",
+        summary.textured_patches, summary.reuses, summary.textures_stored, summary.db,
+        3e-6 * static_cast<double>(summary.pixels_before),
+        3e-6 * static_cast<double>(summary.pixels_after));
     spdlog::info("TSDF {:.1f} MB, mesh {} vertices, peak RSS {:.0f} MB; wrote {}/",
                  static_cast<double>(summary.tsdf_bytes) / 1e6, summary.mesh_vertices,
                  summary.peak_rss_mb, args.out_dir);

@@ -2,8 +2,8 @@
 
 #include <algorithm>
 #include <fstream>
-
 #include <memory>
+#include <optional>
 
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
@@ -80,14 +80,35 @@ void addPlaneFigures(const PlaneEvaluation& planes, nlohmann::json& figures) {
   figures["planes"] = per_plane;
 }
 
-void addTextureFigures(const TextureEvaluation& textures, nlohmann::json& figures) {
+// The run's pixels_after (report.json's bytes_after / 3), when it has one.
+std::optional<double> pixelsAfter(const nlohmann::json& report) {
+  const auto bytes = report.find("bytes_after");
+  if (bytes == report.end() || !bytes->is_number()) return std::nullopt;
+  return bytes->get<double>() / 3.0;
+}
+
+// `report`: the run's report.json, for the economy's pixels_after.
+void addTextureFigures(const TextureEvaluation& textures, const nlohmann::json& report,
+                       nlohmann::json& figures) {
   using nlohmann::json;
-  auto optional = [](const std::optional<double>& v) { return v ? json(*v) : json(nullptr); };
+  auto optional = [](const auto& v) { return v ? json(*v) : json(nullptr); };
   figures["gt_psnr_mean"] = optional(textures.psnr_mean_db);
   figures["gt_psnr_min"] = optional(textures.psnr_min_db);
   figures["gt_psnr_registered_mean"] = optional(textures.registered_psnr_mean_db);
   figures["gt_psnr_texels"] = textures.texels;
   figures["gt_psnr_tsdf_baseline_mean"] = optional(textures.baseline_psnr_mean_db);
+  // Matching and economy (docs/METRICS.md).
+  figures["false_match_rate"] = optional(textures.false_match_rate);
+  figures["missed_match_rate"] = optional(textures.missed_match_rate);
+  figures["false_matches"] = textures.false_matches;
+  figures["missed_matches"] = textures.missed_matches;
+  figures["reuses_evaluated"] = textures.reuses;
+  figures["stored_evaluated"] = textures.stored;
+  figures["ideal_pixels"] = optional(textures.ideal_pixels);
+  const std::optional<double> pixels_after = pixelsAfter(report);
+  figures["economy"] = textures.ideal_pixels && pixels_after && *pixels_after > 0.0
+                           ? json(*textures.ideal_pixels / *pixels_after)
+                           : json(nullptr);
   json per_patch = json::array();
   for (const PatchTextureResult& p : textures.patches) {
     per_patch.push_back({{"patch", p.patch_id},
@@ -96,7 +117,17 @@ void addTextureFigures(const TextureEvaluation& textures, nlohmann::json& figure
                          {"psnr_db", p.psnr_db},
                          {"registered_psnr_db", p.registered_psnr_db},
                          {"shift_m", p.shift_m},
-                         {"tsdf_baseline_psnr_db", optional(p.baseline_psnr_db)}});
+                         {"tsdf_baseline_psnr_db", optional(p.baseline_psnr_db)},
+                         {"observed_texels", p.observed_texels},
+                         {"true_texture", p.true_texture},
+                         {"texture_id", optional(p.texture_id)},
+                         {"reused", p.reused},
+                         {"reuse_psnr_db", optional(p.reuse_psnr_db)},
+                         {"reuse_registered_psnr_db", optional(p.reuse_registered_psnr_db)},
+                         {"reuse_shift_texels", optional(p.reuse_shift_texels)},
+                         {"reuse_texels", p.reuse_texels},
+                         {"false_match", p.false_match},
+                         {"missed_match", p.missed_match}});
   }
   figures["textures"] = per_patch;
 }
@@ -149,20 +180,20 @@ nlohmann::json evaluateRun(const std::filesystem::path& run_dir,
     addPlaneFigures(planes, figures);
   }
   figures["gt_psnr_mean"] = nullptr;
+  // Null unless the texture figures below can be computed (docs/METRICS.md).
+  for (const char* key : {"false_match_rate", "missed_match_rate", "economy"}) {
+    figures[key] = nullptr;
+  }
   if (gt.contains("planes") && gt.contains("textures") && std::filesystem::exists(patches_path)) {
     const auto baseline = meshBaseline(run_dir);
     try {
       addTextureFigures(evaluateTextures(gt, ground_truth.parent_path(), truth_poses,
                                          readJson(patches_path), run_dir, T_gt_est, baseline.get()),
-                        figures);
+                        report, figures);
     } catch (const core::Error& e) {
       throw core::Error(
           fmt::format("{} against {}: {}", patches_path.string(), ground_truth.string(), e.what()));
     }
-  }
-  // Figures of stages that do not exist yet stay null (docs/METRICS.md).
-  for (const char* key : {"false_match_rate", "missed_match_rate", "economy"}) {
-    figures[key] = nullptr;
   }
   figures["ground_truth"] = ground_truth.string();
   mergeIntoReport(report_path, report, figures);

@@ -2,8 +2,10 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <map>
 #include <memory>
+#include <set>
 
 #include <fmt/format.h>
 #include <Eigen/Geometry>
@@ -14,6 +16,7 @@
 #include "tessera/core/config.h"
 #include "tessera/core/error.h"
 #include "tessera/drivers/synthetic/texture.h"
+#include "tessera/eval/reuse_sheet.h"
 #include "tessera/fusion/mesh_colours.h"
 #include "tessera/texture/bitmap_builder.h"
 #include "tessera/texture/bitmap_export.h"
@@ -27,6 +30,7 @@ using drivers::synthetic::Texture;
 
 struct TexturedPlane {
   std::string id;
+  std::string texture_id;
   FramedPlane plane;
   Polygon polygon;
   const Texture* texture = nullptr;
@@ -73,6 +77,7 @@ std::vector<TexturedPlane> truthPlanes(
                                     p.at("texture").get<std::string>()));
     }
     plane.texture = texture->second.get();
+    plane.texture_id = texture->first;
     const auto& mapping = p.at("texture_to_plane");
     plane.rotation_rad = mapping.at("rotation_rad").get<double>();
     plane.scale = mapping.at("scale").get<double>();
@@ -184,13 +189,16 @@ Comparison compare(const cv::Mat& image, const TruthImage& truth) {
 }
 
 // The shift (texels) of the truth that best lines it up with the bitmap, by phase correlation
-// of their grey levels where both have colour; zero when it exceeds max_texels.
-Eigen::Vector2d registrationShift(const cv::Mat& rgb, const TruthImage& truth, double max_texels) {
+// of their grey levels where both have colour (the truth, and `rgb` where `rgb_valid` is set
+// when given); zero when it exceeds max_texels.
+Eigen::Vector2d registrationShift(const cv::Mat& rgb, const TruthImage& truth, double max_texels,
+                                  const cv::Mat& rgb_valid = cv::Mat()) {
   cv::Mat got, want;
   cv::cvtColor(rgb, got, cv::COLOR_RGB2GRAY);
   got.convertTo(got, CV_32F);
   cv::cvtColor(truth.colour, want, cv::COLOR_RGB2GRAY);
-  const cv::Mat valid = truth.plane >= 0;
+  cv::Mat valid = truth.plane >= 0;
+  if (!rgb_valid.empty()) valid &= rgb_valid;
   // Each image minus its mean where valid, zero elsewhere, so the mask's edge does not
   // dominate the correlation.
   got.setTo(cv::mean(got, valid), ~valid);
@@ -200,6 +208,14 @@ Eigen::Vector2d registrationShift(const cv::Mat& rgb, const TruthImage& truth, d
   const cv::Point2d shift = cv::phaseCorrelate(want, got);
   const Eigen::Vector2d d(-shift.x, -shift.y);  // the truth moved by -shift matches the bitmap
   return d.norm() <= max_texels ? d : Eigen::Vector2d::Zero();
+}
+
+// `rgb` (CV_8UC3) as CV_32FC3 with NaN where `covered` is 0, for compare().
+cv::Mat withHoles(const cv::Mat& rgb, const cv::Mat& covered) {
+  cv::Mat values;
+  rgb.convertTo(values, CV_32FC3);
+  values.setTo(cv::Scalar::all(std::numeric_limits<double>::quiet_NaN()), covered == 0);
+  return values;
 }
 
 // The TSDF mesh's colour at each texel the truth covers (NaN where the mesh has none).
@@ -220,6 +236,79 @@ cv::Mat meshColours(const TruthImage& truth, TexelToRun runPoint,
     }
   });
   return colours;
+}
+
+// Judges a reuse (docs/METRICS.md "Matching"): the texture the map shows, rendered onto the
+// patch's grid, against the truth on that grid; `own_shift` is the registration shift of the
+// patch's own bitmap, already in `result` with its registered PSNR. `renderTruthShifted(d)` is
+// the truth on the grid moved by d texels.
+template <typename RenderTruthShifted>
+void judgeReuse(const InstanceRender& shown, const TruthImage& on_grid,
+                const Eigen::Vector2d& own_shift, double max_shift_texels,
+                RenderTruthShifted renderTruthShifted, const TextureEvaluationOptions& options,
+                PatchTextureResult& result) {
+  const cv::Mat values = withHoles(shown.rgb, shown.covered);
+  const Comparison placed = compare(values, on_grid);
+  result.reuse_texels = placed.texels;
+  if (placed.texels == 0) {  // the map shows nothing where the patch saw the surface
+    result.false_match = true;
+    return;
+  }
+  result.reuse_psnr_db = placed.psnr_db;
+  const Eigen::Vector2d shift =
+      registrationShift(shown.rgb, on_grid, max_shift_texels, shown.covered);
+  double registered = placed.psnr_db;
+  if (!shift.isZero()) {
+    registered = std::max(registered, compare(values, renderTruthShifted(shift)).psnr_db);
+  }
+  result.reuse_registered_psnr_db = registered;
+  // What both shifts share is where the patch lies in the map; the rest is the transform's error.
+  result.reuse_shift_texels = (shift - own_shift).norm();
+  result.false_match = *result.reuse_shift_texels > options.max_reuse_shift_texels ||
+                       registered < result.registered_psnr_db - options.max_reuse_psnr_drop_db;
+}
+
+// Marks the missed matches: patches that stored their own texture though an earlier-stored
+// texture of the run (texture ids grow in commit order) came from the same true texture.
+std::size_t markMissedMatches(std::vector<PatchTextureResult>& patches) {
+  std::vector<PatchTextureResult*> stored;
+  for (PatchTextureResult& p : patches) {
+    if (p.texture_id && !p.reused) stored.push_back(&p);
+  }
+  std::sort(stored.begin(), stored.end(),
+            [](const auto* a, const auto* b) { return *a->texture_id < *b->texture_id; });
+  std::set<std::string> already_stored;
+  std::size_t missed = 0;
+  for (PatchTextureResult* p : stored) {
+    p->missed_match = !already_stored.insert(p->true_texture).second;
+    if (p->missed_match) ++missed;
+  }
+  return missed;
+}
+
+// The ideal size of the run's textures in texels of texel_m (docs/METRICS.md "Texture economy"):
+// each distinct true texture of the patches once, a periodic one at its smallest exact period
+// cell (as it appears on the plane: texture_to_plane's scale; the largest over the planes),
+// another at the most texels one patch on it observed.
+double idealPixels(const std::vector<PatchTextureResult>& patches,
+                   const std::vector<int>& main_planes, const std::vector<TexturedPlane>& planes,
+                   double texel_m) {
+  std::map<std::string, double> ideal;  // by true texture
+  for (std::size_t i = 0; i < patches.size(); ++i) {
+    const TexturedPlane& plane = planes[static_cast<std::size_t>(main_planes[i])];
+    double pixels = static_cast<double>(patches[i].observed_texels);
+    if (const auto lattice = plane.texture->lattice()) {
+      const Eigen::Vector2d& a = (*lattice)[0];
+      const Eigen::Vector2d& b = (*lattice)[1];
+      const double cell_m2 = std::abs(a.x() * b.y() - a.y() * b.x()) * plane.scale * plane.scale;
+      pixels = cell_m2 / (texel_m * texel_m);
+    }
+    double& entry = ideal[plane.texture_id];
+    entry = std::max(entry, pixels);
+  }
+  double sum = 0.0;
+  for (const auto& [id, pixels] : ideal) sum += pixels;
+  return sum;
 }
 
 }  // namespace
@@ -246,6 +335,9 @@ TextureEvaluation evaluateTextures(const nlohmann::json& truth,
 
   TextureEvaluation result;
   std::vector<double> psnrs, registered_psnrs, baseline_psnrs;
+  std::vector<int> main_planes;  // of result.patches
+  double texel_sum_m = 0.0;
+  std::size_t bitmaps = 0;
   for (const auto& patch : patches.at("patches")) {
     if (!patch.contains("texture") || patch["texture"].is_null()) continue;
     const auto& texture = patch["texture"];
@@ -255,6 +347,8 @@ TextureEvaluation evaluateTextures(const nlohmann::json& truth,
     const Eigen::Vector3d origin = vec3(patch.at("origin")), u_axis = vec3(patch.at("u_axis")),
                           v_axis = vec3(patch.at("v_axis"));
     const double t = texture.at("texel_m").get<double>();
+    texel_sum_m += t;
+    ++bitmaps;
     const Eigen::Vector2d grid_origin(texture.at("origin_uv").at(0).get<double>(),
                                       texture.at("origin_uv").at(1).get<double>());
     const Eigen::Vector2d x_axis(texture.at("x_axis").at(0).get<double>(),
@@ -294,10 +388,28 @@ TextureEvaluation evaluateTextures(const nlohmann::json& truth,
     patch_result.patch_id = patch.at("id").get<int>();
     patch_result.texels = placed.texels;
     patch_result.psnr_db = placed.psnr_db;
-    patch_result.plane = planes[static_cast<std::size_t>(placed.main_plane)].id;
-    const Eigen::Vector2d shift = registrationShift(rgb, on_grid, options.max_shift_m / t);
+    const TexturedPlane& main_plane = planes[static_cast<std::size_t>(placed.main_plane)];
+    patch_result.plane = main_plane.id;
+    patch_result.true_texture = main_plane.texture_id;
+    patch_result.observed_texels = static_cast<std::size_t>(
+        cv::countNonZero(state == static_cast<int>(texture::TexelState::kObserved)));
+    const double max_shift_texels = options.max_shift_m / t;
+    const Eigen::Vector2d shift = registrationShift(rgb, on_grid, max_shift_texels);
     patch_result.shift_m = t * shift.norm();
     patch_result.registered_psnr_db = std::max(placed.psnr_db, compare(rgb, render(shift)).psnr_db);
+    if (const auto instance = patch.find("instance");
+        instance != patch.end() && instance->is_object()) {
+      patch_result.texture_id = instance->at("texture_id").get<std::int64_t>();
+      patch_result.reused = instance->value("reused", false);
+      if (patch_result.reused) {
+        judgeReuse(*renderInstance(patch, run_dir), on_grid, shift, max_shift_texels, render,
+                   options, patch_result);
+        ++result.reuses;
+        if (patch_result.false_match) ++result.false_matches;
+      } else {
+        ++result.stored;
+      }
+    }
     if (baseline != nullptr) {
       const cv::Mat mesh = meshColours(
           on_grid,
@@ -313,6 +425,7 @@ TextureEvaluation evaluateTextures(const nlohmann::json& truth,
     registered_psnrs.push_back(patch_result.registered_psnr_db);
     result.texels += placed.texels;
     result.patches.push_back(patch_result);
+    main_planes.push_back(placed.main_plane);
   }
   auto mean = [](const std::vector<double>& v) {
     double sum = 0.0;
@@ -325,6 +438,24 @@ TextureEvaluation evaluateTextures(const nlohmann::json& truth,
   }
   if (!registered_psnrs.empty()) result.registered_psnr_mean_db = mean(registered_psnrs);
   if (!baseline_psnrs.empty()) result.baseline_psnr_mean_db = mean(baseline_psnrs);
+
+  result.missed_matches = markMissedMatches(result.patches);
+  if (result.reuses > 0) {
+    result.false_match_rate =
+        static_cast<double>(result.false_matches) / static_cast<double>(result.reuses);
+  }
+  // The share of the chances to reuse that were missed: a chance is a patch whose true texture
+  // was already in the database, taken (a correct reuse) or missed (stored again); false
+  // reuses are left out, being neither.
+  const std::size_t chances = result.missed_matches + result.reuses - result.false_matches;
+  if (chances > 0) {
+    result.missed_match_rate =
+        static_cast<double>(result.missed_matches) / static_cast<double>(chances);
+  }
+  if (bitmaps > 0) result.mean_texel_m = texel_sum_m / static_cast<double>(bitmaps);
+  if (!result.patches.empty() && result.mean_texel_m) {
+    result.ideal_pixels = idealPixels(result.patches, main_planes, planes, *result.mean_texel_m);
+  }
   return result;
 }
 

@@ -6,13 +6,17 @@
 #include <chrono>
 #include <cmath>
 #include <fstream>
+#include <numeric>
+#include <set>
 
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 #include <nlohmann/json.hpp>
 
 #include "tessera/core/error.h"
+#include "tessera/db/texture_store.h"
 #include "tessera/pipeline/flow_graph.h"
+#include "tessera/pipeline/texture_db_stages.h"
 #include "tessera/planes/patch_export.h"
 #include "tessera/texture/bitmap_export.h"
 
@@ -48,6 +52,57 @@ std::optional<double> percentile(std::vector<double> values, double p) {
   return values[k];
 }
 
+void removeDatabaseFiles(const std::filesystem::path& path) {
+  for (const char* suffix : {"", "-wal", "-shm", "-journal"}) {
+    std::error_code ec;
+    std::filesystem::remove(path.string() + suffix, ec);
+  }
+}
+
+// Gives each exported patch the database texture its newest instance names, writes each such
+// texture once (OUT/textures/texture_<id>.png), and fills the summary's economy figures.
+void bindMapTextures(const CommitStage& commits, const StoreCatalog& catalog,
+                     const std::filesystem::path& out_dir, planes::TextureBindings& bindings,
+                     RunSummary& summary) {
+  std::set<std::int64_t> used;
+  for (auto& [patch_id, binding] : bindings) {
+    summary.pixels_before += static_cast<std::size_t>(binding.width) * binding.height;
+    const auto it = commits.instances().find(patch_id);
+    const auto stored = it != commits.instances().end() && it->second.version == binding.version
+                            ? catalog.load(it->second.texture_id)
+                            : nullptr;
+    if (!stored) {  // not committed: the map shows the patch's own bitmap
+      summary.pixels_after += static_cast<std::size_t>(binding.width) * binding.height;
+      continue;
+    }
+    const db::TextureInstance& instance = it->second;
+    const cv::Mat& rgb = stored->description.rgb;
+    planes::MapTexture shown;
+    shown.texture_id = instance.texture_id;
+    shown.image = fmt::format("textures/texture_{}.png", instance.texture_id);
+    shown.width = rgb.cols;
+    shown.height = rgb.rows;
+    shown.transform = instance.transform;
+    shown.tiled = stored->pattern;
+    shown.reused = instance.reused;
+    shown.psnr_db = instance.psnr_db;
+    if (used.insert(instance.texture_id).second) {
+      texture::writeRgbaPng(out_dir / shown.image, rgb, stored->description.mask);
+      summary.pixels_after += rgb.total();
+    }
+    summary.textured_patches += 1;
+    if (instance.reused) {
+      summary.reuses += 1;
+      if (instance.psnr_db) summary.reuse_psnrs_db.push_back(*instance.psnr_db);
+    }
+    binding.map_texture = shown;
+  }
+  summary.textures_stored = commits.texturesStored();
+  summary.commit_failures = commits.commitFailures();
+  summary.ccv_considered = commits.ccvConsidered();
+  summary.ccv_removed = commits.ccvRemoved();
+}
+
 }  // namespace
 
 RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
@@ -67,11 +122,23 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
   TextureStage texture_stage(config.textures);
   StatsSink sink(options.out_dir, total, options.on_progress,
                  [&texture_stage] { return texture_stage.bitmapBytes(); });
+  // Without --db the run starts its own database, replacing one an earlier run left in OUT.
+  const std::string db_location =
+      options.db ? *options.db : (options.out_dir / "textures.db").string();
+  if (!options.db) removeDatabaseFiles(db_location);
+  const std::unique_ptr<db::TextureStore> store = db::openTextureStore(db_location);
+  const std::int64_t run_id = store->beginRun(source.name());
+  const match::MatchCascade cascade(config.match);
+  StoreCatalog catalog(*store, config.match);
+  const MatchStage match_stage(texture_stage, cascade, catalog);
+  CommitStage commit_stage(*store, catalog, cascade, run_id);
 
   const auto start = std::chrono::steady_clock::now();
-  runGraph(source_stage, tracking_stage, integration_stage, plane_stage, texture_stage, sink,
+  runGraph(source_stage, tracking_stage, integration_stage, plane_stage, texture_stage, match_stage,
+           commit_stage, sink,
            {threads, source.isLive() ? config.pipeline.live_frames_in_flight
                                      : config.pipeline.max_frames_in_flight});
+  store->finishRun(run_id);
   const double wall_s =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 
@@ -92,6 +159,10 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
   summary.source_interruptions = sink.interruptions();
   summary.latency_ms_p50 = percentile(sink.latenciesMs(), 0.50);
   summary.latency_ms_p95 = percentile(sink.latenciesMs(), 0.95);
+  summary.commit_latency_ms_p50 = percentile(commit_stage.commitLatenciesMs(), 0.50);
+  summary.commit_latency_ms_p95 = percentile(commit_stage.commitLatenciesMs(), 0.95);
+  if (commit_stage.matchTimer().count() > 0)
+    summary.match_ms_p50 = commit_stage.matchTimer().medianMs();
   summary.wall_s = wall_s;
   summary.fps = wall_s > 0.0 ? static_cast<double>(summary.frames) / wall_s : 0.0;
   summary.ate = eval::absoluteTrajectoryError(sink.estimate(), sink.groundTruth());
@@ -102,6 +173,8 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
                     figures("integration", integration_stage.timer()),
                     figures("planes", plane_stage.timer()),
                     figures("textures", texture_stage.timer()),
+                    figures("match", commit_stage.matchTimer()),
+                    figures("commit", commit_stage.timer()),
                     figures("sink", sink.timer())};
 
   // Export: the mesh is written even when the source ended abnormally, so work is kept.
@@ -116,8 +189,10 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
     summary.colour_samples += patch.samples.size();
     summary.colour_sample_bytes += patch.samples.bytes();
   }
-  const planes::TextureBindings textures =
+  planes::TextureBindings textures =
       texture::writeBitmaps(texture_stage.bitmaps(), patches, options.out_dir);
+  summary.db = store->location();
+  bindMapTextures(commit_stage, catalog, options.out_dir, textures, summary);
   for (const auto& [id, binding] : textures) {
     summary.bitmaps += 1;
     summary.bitmap_texels_observed += binding.observed;
@@ -188,12 +263,43 @@ void writeReport(const RunSummary& summary, const std::filesystem::path& path) {
   report["device_reconnects"] = summary.live_stats.reconnects;
   report["source_end_problem"] =
       summary.source_end_problem.empty() ? json(nullptr) : json(summary.source_end_problem);
-  // Figures of stages that do not exist yet: null, never a made-up value.
-  for (const char* key :
-       {"textures_stored", "patterns_stored", "reuses", "reuse_rate", "bytes_before", "bytes_after",
-        "compression", "patch_psnr_mean", "patch_psnr_p5", "patch_psnr_min", "ccv_rejection",
-        "commit_latency_ms_p50", "commit_latency_ms_p95", "plane_recall", "plane_precision",
-        "false_match_rate", "missed_match_rate", "economy", "gt_psnr_mean"}) {
+  // The texture database: economy and matching (docs/METRICS.md).
+  report["db"] = summary.db;
+  report["textures_stored"] = summary.textures_stored;
+  report["patterns_stored"] = summary.patterns_stored;
+  report["textured_patches"] = summary.textured_patches;
+  report["reuses"] = summary.reuses;
+  report["commit_failures"] = summary.commit_failures;
+  report["reuse_rate"] = summary.textured_patches > 0
+                             ? json(static_cast<double>(summary.reuses) /
+                                    static_cast<double>(summary.textured_patches))
+                             : json(nullptr);
+  report["bytes_before"] = 3 * summary.pixels_before;
+  report["bytes_after"] = 3 * summary.pixels_after;
+  report["compression"] = summary.pixels_after > 0
+                              ? json(static_cast<double>(summary.pixels_before) /
+                                     static_cast<double>(summary.pixels_after))
+                              : json(nullptr);
+  std::vector<double> psnrs = summary.reuse_psnrs_db;
+  std::sort(psnrs.begin(), psnrs.end());
+  report["patch_psnr_mean"] = psnrs.empty()
+                                  ? json(nullptr)
+                                  : json(std::accumulate(psnrs.begin(), psnrs.end(), 0.0) /
+                                         static_cast<double>(psnrs.size()));
+  report["patch_psnr_p5"] = optional(percentile(psnrs, 0.05));
+  report["patch_psnr_min"] = psnrs.empty() ? json(nullptr) : json(psnrs.front());
+  report["patch_psnr_own"] = summary.textured_patches - psnrs.size();  // infinite: own bitmap
+  report["ccv_considered"] = summary.ccv_considered;
+  report["ccv_rejection"] = summary.ccv_considered > 0
+                                ? json(static_cast<double>(summary.ccv_removed) /
+                                       static_cast<double>(summary.ccv_considered))
+                                : json(nullptr);
+  report["commit_latency_ms_p50"] = optional(summary.commit_latency_ms_p50);
+  report["commit_latency_ms_p95"] = optional(summary.commit_latency_ms_p95);
+  report["match_ms_p50"] = optional(summary.match_ms_p50);
+  // Against ground truth: `tessera eval` fills these.
+  for (const char* key : {"plane_recall", "plane_precision", "false_match_rate",
+                          "missed_match_rate", "economy", "gt_psnr_mean"}) {
     report[key] = nullptr;
   }
   json stages = json::object();

@@ -1,6 +1,7 @@
 #include "tessera/pipeline/run_config.h"
 
 #include "tessera/core/error.h"
+#include "tessera/match/match_config.h"
 #include "tessera/planes/planes_config.h"
 
 namespace tessera::pipeline {
@@ -25,6 +26,7 @@ RunConfig readRunConfig(const core::ConfigDocument& doc) {
     planes::readConfig(root.section("patches"), config.patches);
     planes::readConfig(root.section("pose_correction"), config.pose_correction);
     texture::readConfig(root.section("textures"), config.textures);
+    match::readConfig(root.section("match"), config.match);
   } catch (const core::ConfigError& e) {
     const std::string message = e.what();
     // Range checks inside the stages do not know the file; add it.

@@ -11,6 +11,7 @@
 #include "tessera/core/registration.h"
 #include "tessera/eval/trajectory.h"
 #include "tessera/eval/view_evaluation.h"
+#include "tessera/pipeline/texture_db_stages.h"
 
 namespace tessera::pipeline {
 
@@ -316,6 +317,7 @@ StatsSink::StatsSink(const std::filesystem::path& out_dir, std::optional<std::si
 
 void StatsSink::process(const FusedFrame& fused) {
   ScopedStageTime time(timer_);
+  std::lock_guard lock(write_mutex_);
   if (fused.frame.source_interrupted) {
     ++interruptions_;
     if (!write_failed_) {
@@ -355,7 +357,7 @@ void StatsSink::process(const FusedFrame& fused) {
                            {"planes_detected", fused.planes_detected},
                            {"patches_live", fused.patches_live},
                            {"patches_finalized", fused.patches_finalized},
-                           {"textures_stored", 0}};
+                           {"textures_stored", textures_stored_.load()}};
     if (!fused.integrated) line["skip_reason"] = fused.skip_reason;
     if (fused.latency_ms) line["latency_ms"] = *fused.latency_ms;
     if (fused.colour_gain) {
@@ -377,6 +379,7 @@ void StatsSink::process(const FusedFrame& fused) {
 }
 
 void StatsSink::writePatchEvents(const std::vector<planes::PatchEvent>& events) {
+  std::lock_guard lock(write_mutex_);
   for (const planes::PatchEvent& event : events) {
     const bool finalized = event.kind == planes::PatchEvent::Kind::kFinalized;
     nlohmann::json line = {{"type", "patch"},
@@ -386,6 +389,55 @@ void StatsSink::writePatchEvents(const std::vector<planes::PatchEvent>& events) 
                            {"frames_done", frames_done_}};
     if (finalized) line["area_m2"] = event.area_m2;
     stats_ << line.dump() << '\n';
+  }
+}
+
+void StatsSink::writeCommit(const CommitRecord& record, std::size_t batch, std::size_t batch_size,
+                            std::uint64_t frame_index, std::size_t textures_stored) {
+  std::lock_guard lock(write_mutex_);
+  textures_stored_ = textures_stored;
+  BatchCounts& counts = batches_[batch];
+  counts.patches += 1;
+  counts.considered += record.ccv_considered;
+  counts.removed += record.ccv_removed;
+  const bool reused = record.instance && record.instance->reused;
+  counts.reuses += reused ? 1 : 0;
+  if (write_failed_) return;
+  if (record.patch_id != 0 || record.instance) {
+    nlohmann::json line = {{"type", "patch"},
+                           {"event", "committed"},
+                           {"id", record.patch_id},
+                           {"version", record.version},
+                           {"frame", frame_index},
+                           {"committed", record.instance.has_value()},
+                           {"method", record.method},
+                           {"ccv_considered", record.ccv_considered},
+                           {"ccv_removed", record.ccv_removed},
+                           {"bitmap_ms", record.bitmap_ms},
+                           {"describe_ms", record.describe_ms},
+                           {"match_ms", record.match_ms},
+                           {"commit_latency_ms", record.commit_latency_ms},
+                           {"textures_stored", textures_stored}};
+    if (record.instance) {
+      const core::Similarity2& s = record.instance->transform;
+      line["texture_id"] = record.instance->texture_id;
+      line["reused"] = reused;
+      line["transform"] = {s.a, s.b, s.tx, s.ty};
+      line["psnr_db"] = record.instance->psnr_db ? nlohmann::json(*record.instance->psnr_db)
+                                                 : nlohmann::json(nullptr);
+    }
+    stats_ << line.dump() << '\n';
+  }
+  if (counts.patches == batch_size) {
+    stats_ << nlohmann::json{{"type", "match"},
+                             {"frame", frame_index},
+                             {"patches", counts.patches},
+                             {"ccv_considered", counts.considered},
+                             {"ccv_removed", counts.removed},
+                             {"reuses", counts.reuses}}
+                  .dump()
+           << '\n';
+    batches_.erase(batch);
   }
 }
 

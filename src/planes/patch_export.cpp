@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <fstream>
+#include <set>
 
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
@@ -47,9 +48,23 @@ const TextureBinding* textureOf(const Patch& patch, const TextureBindings& textu
 // reach half a cell beyond the grid.
 Eigen::Vector2d textureCoordinates(const TextureBinding& texture, double u, double v) {
   const Eigen::Vector2d d = Eigen::Vector2d(u, v) - texture.origin_uv;
+  if (const auto& shown = texture.map_texture) {
+    // Pixel-centre coordinates on the patch's grid, through the instance, back to corners.
+    const Eigen::Vector2d texel(d.dot(texture.x_axis) / texture.texel_m - 0.5,
+                                d.dot(texture.y_axis) / texture.texel_m - 0.5);
+    const Eigen::Vector2d q = shown->transform.apply(texel) + Eigen::Vector2d(0.5, 0.5);
+    const double s = q.x() / shown->width, t = 1.0 - q.y() / shown->height;
+    if (shown->tiled) return {s, t};
+    return {std::clamp(s, 0.0, 1.0), std::clamp(t, 0.0, 1.0)};
+  }
   const double s = d.dot(texture.x_axis) / texture.texel_m / texture.width;
   const double t = 1.0 - d.dot(texture.y_axis) / texture.texel_m / texture.height;
   return {std::clamp(s, 0.0, 1.0), std::clamp(t, 0.0, 1.0)};
+}
+
+std::string materialOf(const Patch& patch, const TextureBinding& texture) {
+  return texture.map_texture ? fmt::format("texture_{}", texture.map_texture->texture_id)
+                             : fmt::format("patch_{}", patch.id);
 }
 
 void writeMaterials(const PatchMap& map, const TextureBindings& textures,
@@ -59,9 +74,17 @@ void writeMaterials(const PatchMap& map, const TextureBindings& textures,
   // Patches without a bitmap use this plain material: an OBJ's material carries over from one
   // object to the next, so each patch names its own.
   out << "newmtl untextured\nKa 1 1 1\nKd 0.7 0.7 0.7\nKs 0 0 0\nillum 1\n\n";
+  std::set<std::int64_t> written;
   for (const Patch& patch : map.patches()) {
     const TextureBinding* texture = patch.finalized ? textureOf(patch, textures) : nullptr;
     if (texture == nullptr) continue;
+    if (const auto& shown = texture->map_texture) {
+      if (!written.insert(shown->texture_id).second) continue;
+      out << fmt::format(
+          "newmtl {}\nKa 1 1 1\nKd 1 1 1\nKs 0 0 0\nillum 1\nmap_Kd {}\nmap_d {}\n\n",
+          materialOf(patch, *texture), shown->image, shown->image);
+      continue;
+    }
     out << fmt::format(
         "newmtl patch_{}\nKa 1 1 1\nKd 1 1 1\nKs 0 0 0\nillum 1\nmap_Kd {}\n"
         "map_d {}\n\n",
@@ -88,8 +111,7 @@ void writePatchesObj(const PatchMap& map, const std::filesystem::path& path,
     const Patch::Frame frame = patch.planeFrame();
     const TextureBinding* texture = textureOf(patch, textures);
     out << fmt::format("o patch_{}_v{}\n", patch.id, patch.version);
-    out << (texture != nullptr ? fmt::format("usemtl patch_{}\n", patch.id)
-                               : std::string("usemtl untextured\n"));
+    out << "usemtl " << (texture != nullptr ? materialOf(patch, *texture) : "untextured") << '\n';
     // Every vertex gets a texture coordinate (0, 0 on untextured patches), so that vertex and
     // texture-coordinate indices stay equal through the file.
     auto vertex = [&](double u, double v) {
@@ -115,7 +137,8 @@ void writePatchesObj(const PatchMap& map, const std::filesystem::path& path,
         const double v1 = v0 + cell;
         const std::size_t a = vertex(u0, v0), b = vertex(u1, v0), d = vertex(u1, v1),
                           e = vertex(u0, v1);
-        out << fmt::format("f {0}/{0} {1}/{1} {2}/{2} {3}/{3}\n", a, b, d, e);
+        // Clockwise in (u, v): the face's normal is -n, towards the side the camera saw.
+        out << fmt::format("f {0}/{0} {1}/{1} {2}/{2} {3}/{3}\n", a, e, d, b);
       }
     }
     auto polyline = [&](const Polygon2& polygon) {
@@ -159,6 +182,20 @@ void writePatchesJson(const PatchMap& map, const std::filesystem::path& path,
                       {"observed", texture->observed},
                       {"inpainted", texture->inpainted}};
     }
+    nlohmann::json instance_json = nullptr;
+    if (const TextureBinding* texture = textureOf(patch, textures);
+        texture != nullptr && texture->map_texture) {
+      const MapTexture& shown = *texture->map_texture;
+      const core::Similarity2& s = shown.transform;
+      instance_json = {{"texture_id", shown.texture_id},
+                       {"image", shown.image},
+                       {"width", shown.width},
+                       {"height", shown.height},
+                       {"transform", {s.a, s.b, s.tx, s.ty}},
+                       {"tiled", shown.tiled},
+                       {"reused", shown.reused},
+                       {"psnr_db", shown.psnr_db ? nlohmann::json(*shown.psnr_db) : nullptr}};
+    }
     patches.push_back({{"id", patch.id},
                        {"version", patch.version},
                        {"normal", vectorJson(patch.normal)},
@@ -169,7 +206,8 @@ void writePatchesJson(const PatchMap& map, const std::filesystem::path& path,
                        {"area_m2", outline.area_m2},
                        {"colour_samples", patch.samples.size()},
                        {"outline", parts},
-                       {"texture", texture_json}});
+                       {"texture", texture_json},
+                       {"instance", instance_json}});
   }
   std::ofstream out = openForWriting(path);
   out << nlohmann::json{{"format", "tessera patches 1"},

@@ -14,6 +14,7 @@ std::vector<PlaneObservation> observationsOf(const core::Frame& frame,
                                              const core::Isometry& T_W_C) {
   const core::Intrinsics& k = frame.intrinsics;
   std::vector<PlaneObservation> observations(detection.planes.size());
+  for (PlaneObservation& observation : observations) observation.camera_W = T_W_C.translation();
   const int step = detection.scale;
   for (int v = 0; v < detection.labels.rows; ++v) {
     const auto* label = detection.labels.ptr<std::uint8_t>(v);
@@ -133,11 +134,13 @@ std::vector<int> PatchMap::add(const std::vector<PlaneObservation>& observations
     if (matches.empty()) {
       Patch patch;
       patch.id = next_id_++;
-      patch.normal = plane.normal;
-      patch.offset = plane.offset;
+      const double facing =
+          plane.normal.dot(observation.camera_W - plane.centroid) > 0.0 ? -1.0 : 1.0;
+      patch.normal = facing * plane.normal;
+      patch.offset = facing * plane.offset;
       patch.origin = plane.centroid;
       patch.u_axis = plane.major_axis;  // eigenvectors: already orthogonal to the normal
-      patch.v_axis = plane.normal.cross(patch.u_axis);
+      patch.v_axis = patch.normal.cross(patch.u_axis);
       patch.samples = ColourSamples(config_.sample_cell_m);
       addObservation(patch, observation.points_W, moments);
       patches_.push_back(std::move(patch));

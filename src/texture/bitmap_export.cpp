@@ -23,6 +23,13 @@ void writePng(const std::filesystem::path& path, const cv::Mat& image) {
 
 }  // namespace
 
+void writeRgbaPng(const std::filesystem::path& path, const cv::Mat& rgb, const cv::Mat& mask) {
+  cv::Mat bgra;
+  cv::cvtColor(rgb, bgra, cv::COLOR_RGB2BGRA);
+  cv::insertChannel(mask, bgra, 3);
+  writePng(path, bgra);
+}
+
 planes::TextureBinding bindingOf(const PatchBitmap& bitmap, const std::string& image,
                                  const std::string& state_image) {
   planes::TextureBinding binding;
@@ -54,11 +61,8 @@ planes::TextureBindings writeBitmaps(const std::map<int, PatchBitmap>& bitmaps,
     if (patch == nullptr || !patch->finalized || patch->version != bitmap.version) continue;
     const std::string image = fmt::format("textures/patch_{}.png", id);
     const std::string state = fmt::format("textures/patch_{}_state.png", id);
-    cv::Mat bgra;
-    cv::cvtColor(bitmap.image, bgra, cv::COLOR_RGB2BGRA);
-    cv::Mat alpha = bitmap.state != static_cast<int>(TexelState::kEmpty);
-    cv::insertChannel(alpha, bgra, 3);
-    writePng(out_dir / image, bgra);
+    writeRgbaPng(out_dir / image, bitmap.image,
+                 bitmap.state != static_cast<int>(TexelState::kEmpty));
     writePng(out_dir / state, bitmap.state);
     bindings.emplace(id, bindingOf(bitmap, image, state));
   }

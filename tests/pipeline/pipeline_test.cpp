@@ -95,9 +95,10 @@ void expectTexturedPatches(const fs::path& out, const RunSummary& summary) {
   const std::string mtl_text((std::istreambuf_iterator<char>(mtl)),
                              std::istreambuf_iterator<char>());
   EXPECT_NE(obj_text.find("mtllib patches.mtl"), std::string::npos);
-  EXPECT_NE(obj_text.find("usemtl patch_"), std::string::npos);
+  // The map shows the database's textures.
+  EXPECT_NE(obj_text.find("usemtl texture_"), std::string::npos);
   EXPECT_NE(obj_text.find("\nvt "), std::string::npos);
-  EXPECT_NE(mtl_text.find("map_Kd textures/patch_"), std::string::npos);
+  EXPECT_NE(mtl_text.find("map_Kd textures/texture_"), std::string::npos);
 }
 
 TEST(Pipeline, RunsEveryGoodFrameAndWritesTheOutputs) {
@@ -122,14 +123,27 @@ TEST(Pipeline, RunsEveryGoodFrameAndWritesTheOutputs) {
   EXPECT_GT(summary.mesh_vertices, 1000u);
   EXPECT_TRUE(fs::is_regular_file(out / "mesh.ply"));
 
-  // stats.jsonl: one line per frame, then the patches finalized at the end of the stream.
+  // stats.jsonl: one line per frame, then the patches finalized at the end of the stream, each
+  // committed to the database, and the prefilter's line for that batch.
   auto lines = readJsonLines(out / "stats.jsonl");
   ASSERT_GE(lines.size(), 8u);
+  std::size_t finalized = 0, committed = 0, batches = 0;
   for (std::size_t i = 7; i < lines.size(); ++i) {
+    if (lines[i]["type"] == "match") {
+      ++batches;
+      continue;
+    }
     EXPECT_EQ(lines[i]["type"], "patch");
-    EXPECT_EQ(lines[i]["event"], "finalized");
+    finalized += lines[i]["event"] == "finalized" ? 1 : 0;
+    if (lines[i]["event"] == "committed") {
+      ++committed;
+      EXPECT_TRUE(lines[i]["committed"].get<bool>());
+      EXPECT_EQ(lines[i]["method"], "stored");  // the first texture of an empty database
+    }
   }
-  EXPECT_EQ(lines.size() - 7, summary.patches_finalized);
+  EXPECT_EQ(finalized, summary.patches_finalized);
+  EXPECT_EQ(committed, summary.patches_finalized);
+  EXPECT_EQ(batches, 1u);
   EXPECT_TRUE(fs::is_regular_file(out / "patches.obj"));
   EXPECT_TRUE(fs::is_regular_file(out / "patches.json"));
   expectTexturedPatches(out, summary);
@@ -159,7 +173,7 @@ TEST(Pipeline, RunsEveryGoodFrameAndWritesTheOutputs) {
 
   std::ifstream report_file(out / "report.json");
   const auto report = nlohmann::json::parse(report_file);
-  // Every key of docs/METRICS.md is present; figures no stage computes yet are null.
+  // Every key of docs/METRICS.md is present.
   for (const char* key : {"source",
                           "frames",
                           "frames_dropped",
@@ -184,7 +198,10 @@ TEST(Pipeline, RunsEveryGoodFrameAndWritesTheOutputs) {
   }
   EXPECT_EQ(report["frames"], 7);
   EXPECT_EQ(report["frames_bad"], 1);
-  EXPECT_TRUE(report["compression"].is_null());
+  EXPECT_EQ(report["textures_stored"], summary.patches_finalized);
+  EXPECT_EQ(report["reuses"], 0);
+  EXPECT_DOUBLE_EQ(report["compression"].get<double>(), 1.0);
+  EXPECT_TRUE(fs::is_regular_file(out / "textures.db"));
   EXPECT_GT(report["peak_rss_mb"].get<double>(), 0.0);
   EXPECT_EQ(report["stages"]["integration"]["calls"], 7);
 }

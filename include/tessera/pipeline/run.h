@@ -19,6 +19,9 @@ struct RunOptions {
   PoseSource poses = PoseSource::kTrack;
   std::optional<std::size_t> max_frames;
   int holdout_every = 0;  // every N-th frame is posed only, for eval's held-out views (0: none)
+  // The texture database the run grows (or reuses from earlier runs); OUT/textures.db when
+  // not given. A postgresql:// URL is refused until that backend exists.
+  std::optional<std::string> db;
   StatsSink::ProgressCallback on_progress;  // may be empty
   const std::atomic<bool>* stop = nullptr;  // set (e.g. by Ctrl-C) to end the stream early
 };
@@ -39,7 +42,7 @@ struct RunSummary {
   std::size_t frames_without_pose = 0;  // not integrated: no pose, tracking lost, or rejected
   int holdout_every = 0;
   std::size_t frames_held_out = 0;  // posed but not fused or textured (--holdout-every)
-  std::string poses;                    // "track" or "gt"
+  std::string poses;                // "track" or "gt"
   std::size_t tracking_losses = 0;
   std::size_t tracking_restarts = 0;
   std::string source_end_problem;  // non-empty when the source ended abnormally
@@ -55,10 +58,10 @@ struct RunSummary {
   std::size_t tsdf_bytes = 0;
   std::size_t tsdf_blocks_released = 0;  // far behind the camera (tsdf.release_distance_m)
   std::size_t mesh_vertices = 0;
-  std::size_t patches_finalized = 0;     // in the map at the end (OUT/patches.obj)
-  std::size_t patch_finalizations = 0;   // every finalization, later versions included
-  std::size_t patches_retired = 0;       // finalized, then merged into another patch
-  std::size_t colour_samples = 0;        // held by all patches at the end
+  std::size_t patches_finalized = 0;    // in the map at the end (OUT/patches.obj)
+  std::size_t patch_finalizations = 0;  // every finalization, later versions included
+  std::size_t patches_retired = 0;      // finalized, then merged into another patch
+  std::size_t colour_samples = 0;       // held by all patches at the end
   std::size_t colour_sample_bytes = 0;
   // Bitmaps of the finalized patches (their current versions), as exported.
   std::size_t bitmaps = 0;
@@ -66,6 +69,18 @@ struct RunSummary {
   std::size_t bitmap_texels_inpainted = 0;
   std::size_t bitmap_bytes = 0;   // 3 bytes per texel of the grids, as held in memory
   double bitmap_ms_per_m2 = 0.0;  // build time over observed area, every version built
+  // The texture database (docs/METRICS.md, "Texture economy" and "Matching").
+  std::string db;
+  std::size_t textures_stored = 0;  // new textures this run stored (versions included)
+  std::size_t patterns_stored = 0;
+  std::size_t textured_patches = 0;  // finalized patches with a committed instance
+  std::size_t reuses = 0;            // ... of which reuse a texture stored before them
+  std::size_t commit_failures = 0;
+  std::size_t pixels_before = 0, pixels_after = 0;
+  std::vector<double> reuse_psnrs_db;  // fidelity of each reuse in the map
+  std::size_t ccv_considered = 0, ccv_removed = 0;
+  std::optional<double> commit_latency_ms_p50, commit_latency_ms_p95;
+  std::optional<double> match_ms_p50;
   // ATE of the fused poses against the recording's ground truth, when it has one.
   std::optional<eval::AteResult> ate;
   std::vector<StageFigures> stages;

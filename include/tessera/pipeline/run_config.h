@@ -6,6 +6,7 @@
 #include "tessera/core/config.h"
 #include "tessera/fusion/tracker.h"
 #include "tessera/fusion/tsdf_map.h"
+#include "tessera/match/match_cascade.h"
 #include "tessera/planes/patch_map.h"
 #include "tessera/planes/plane_alignment.h"
 #include "tessera/planes/plane_detector.h"
@@ -30,6 +31,7 @@ struct RunConfig {
   planes::PatchMapConfig patches;
   planes::PlaneAlignmentConfig pose_correction;
   texture::BitmapConfig textures;
+  match::MatchConfig match;
 };
 
 // Reads every section of `doc` into a RunConfig and rejects unknown keys.

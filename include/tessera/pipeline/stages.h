@@ -9,6 +9,7 @@
 #include <fstream>
 #include <functional>
 #include <map>
+#include <mutex>
 #include <optional>
 #include <string>
 
@@ -24,6 +25,8 @@
 #include "tessera/texture/bitmap_builder.h"
 
 namespace tessera::pipeline {
+
+struct CommitRecord;  // texture_db_stages.h
 
 // Pulls frames from a FrameSource; bad frames are counted, logged and skipped. An interrupted
 // live source gives a marker frame (Frame::source_interrupted) so that the stages finalize
@@ -238,6 +241,11 @@ class StatsSink {
   void process(const FusedFrame& fused);
   // One stats.jsonl line per patch event: {"type":"patch","event":"finalized"|"retired",...}.
   void writePatchEvents(const std::vector<planes::PatchEvent>& events);
+  // One line per committed patch ({"type":"patch","event":"committed",...}) and, once every
+  // patch of its batch (the patches one frame finalized) is in, one {"type":"match",...} line
+  // with the batch's CCV prefilter counts. Called by the commit node, beside process().
+  void writeCommit(const CommitRecord& record, std::size_t batch, std::size_t batch_size,
+                   std::uint64_t frame_index, std::size_t textures_stored);
   // Closes the files; throws core::Error naming one whose writing failed (disk full).
   void flush();
 
@@ -267,6 +275,13 @@ class StatsSink {
   std::vector<double> latencies_ms_;
   std::size_t interruptions_ = 0;
   bool write_failed_ = false;
+  // process() and writeCommit() run on different nodes; the stream is theirs in turn.
+  std::recursive_mutex write_mutex_;
+  std::atomic<std::size_t> textures_stored_{0};
+  struct BatchCounts {
+    std::size_t patches = 0, considered = 0, removed = 0, reuses = 0;
+  };
+  std::map<std::size_t, BatchCounts> batches_;
   StageTimer timer_;
 };
 

@@ -2,13 +2,29 @@
 // The finalized patches as files a user (or `tessera eval`) can open: an OBJ of untextured
 // polygons, and a JSON with each patch's plane, frame and outline.
 #include <cstddef>
+#include <cstdint>
 #include <filesystem>
 #include <map>
+#include <optional>
 #include <string>
 
+#include "tessera/core/similarity2.h"
 #include "tessera/planes/patch_map.h"
 
 namespace tessera::planes {
+
+// The database texture a patch shows in the map: its own bitmap as stored, or a texture it
+// reuses. Patch texel centre (col, row) -> texture pixel centre through `transform`; a pattern
+// tile repeats (texture coordinates beyond [0, 1]).
+struct MapTexture {
+  std::int64_t texture_id = 0;
+  std::string image;  // RGBA PNG, relative to the output folder
+  int width = 0, height = 0;
+  core::Similarity2 transform;
+  bool tiled = false;
+  bool reused = false;
+  std::optional<double> psnr_db;  // fidelity of a reuse
+};
 
 // Where a patch's bitmap lies on the patch: texel (col, row) covers origin_uv + texel_m (col
 // x_axis + row y_axis) and the next texel_m along each axis, in the patch's (u, v) frame.
@@ -21,6 +37,7 @@ struct TextureBinding {
   Eigen::Vector2d x_axis = Eigen::Vector2d::UnitX(), y_axis = Eigen::Vector2d::UnitY();
   int width = 0, height = 0;
   std::size_t observed = 0, inpainted = 0;
+  std::optional<MapTexture> map_texture;  // what the map shows; the bitmap itself when absent
 };
 using TextureBindings = std::map<int, TextureBinding>;  // by patch id
 
@@ -28,7 +45,9 @@ using TextureBindings = std::map<int, TextureBinding>;  // by patch id
 // occupancy grid (one quad per run of cells in a row, so holes stay open) and line elements
 // trace its simplified outline and holes. A patch with a texture of its current version gets
 // texture coordinates and a material "patch_<id>" whose map_Kd is its image, in a .mtl file
-// next to the OBJ. Throws core::Error naming the file if writing fails.
+// next to the OBJ; a patch with a map texture uses the material "texture_<id>" of that database
+// texture instead, shared by every patch that reuses it, with texture coordinates carried
+// through the instance's transform. Throws core::Error naming the file if writing fails.
 void writePatchesObj(const PatchMap& map, const std::filesystem::path& path,
                      const TextureBindings& textures = {});
 
@@ -36,7 +55,8 @@ void writePatchesObj(const PatchMap& map, const std::filesystem::path& path,
 // "normal", "offset_m", "origin", "u_axis", "v_axis", "area_m2", "colour_samples",
 // "outline": [{"outer": [[u, v], ...], "holes": [[[u, v], ...], ...]}], "texture": {"image",
 // "state_image", "texel_m", "origin_uv", "x_axis", "y_axis", "width", "height", "observed",
-// "inpainted"} or null}]}, finalized only.
+// "inpainted"} or null, "instance": {"texture_id", "image", "width", "height", "transform":
+// [a, b, tx, ty], "tiled", "reused", "psnr_db"} or null}]}, finalized only.
 void writePatchesJson(const PatchMap& map, const std::filesystem::path& path,
                       const TextureBindings& textures = {});
 

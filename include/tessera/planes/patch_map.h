@@ -59,6 +59,10 @@ struct PatchMapConfig {
 // One detected region in world coordinates.
 struct PlaneObservation {
   std::vector<Eigen::Vector3d> points_W;
+  // Where the camera was: a new patch's normal points away from it, into the surface, so that
+  // its (u, v) frame and every bitmap on it show the surface as seen from the front, never
+  // mirrored (a texture seen twice, or imported from a photo, then matches by a similarity).
+  Eigen::Vector3d camera_W = Eigen::Vector3d::Zero();
 };
 
 // The regions of `detection` as world points (frame seen from T_W_C).

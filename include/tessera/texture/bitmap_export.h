@@ -16,6 +16,10 @@ planes::TextureBindings writeBitmaps(const std::map<int, PatchBitmap>& bitmaps,
                                      const planes::PatchMap& map,
                                      const std::filesystem::path& out_dir);
 
+// An RGB image (CV_8UC3) as an RGBA PNG whose alpha is `mask` (CV_8UC1). Throws core::Error
+// naming the file when it cannot be written.
+void writeRgbaPng(const std::filesystem::path& path, const cv::Mat& rgb, const cv::Mat& mask);
+
 // The placement of a bitmap on its patch, with the image names given.
 planes::TextureBinding bindingOf(const PatchBitmap& bitmap, const std::string& image,
                                  const std::string& state_image);

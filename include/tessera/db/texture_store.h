@@ -1,0 +1,76 @@
+#pragma once
+// The texture database. SQLite (embedded, one robot) is the default implementation; the
+// interface is narrow so that a server-backed store can follow. Every method is thread-safe:
+// readers (the matchers) work on committed data while the commit stage writes. Each commit is
+// one transaction; a crash keeps every commit before it and nothing of the one in flight.
+#include <cstdint>
+#include <filesystem>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "tessera/db/texture_record.h"
+
+namespace tessera::db {
+
+// The schema this build reads and writes. A database with a higher version is refused.
+constexpr int kSchemaVersion = 1;
+
+// One commit: new textures, and instances. An instance with texture_id < 0 refers to the new
+// texture at index (-texture_id - 1) of `textures`. An instance replaces any earlier one of
+// the same run and patch (a newer version of the patch), never duplicates it.
+struct Commit {
+  std::vector<TextureRecord> textures;
+  std::vector<TextureInstance> instances;
+};
+
+struct CcvEntry {
+  std::int64_t id = 0;
+  std::vector<float> ccv;
+};
+
+class TextureStore {
+ public:
+  virtual ~TextureStore() = default;
+
+  // Where it is (a file path, or a server URL without credentials), for messages.
+  virtual std::string location() const = 0;
+
+  virtual std::int64_t beginRun(const std::string& source) = 0;
+  virtual void finishRun(std::int64_t run_id) = 0;
+
+  // Stores `commit` in one transaction; returns the ids given to its new textures, in order.
+  // Throws core::Error naming the database when it cannot (disk full, read-only); nothing of
+  // that commit is then stored.
+  virtual std::vector<std::int64_t> commit(const Commit& commit) = 0;
+
+  // The id of a stored texture with these pixels (contentKey), if any.
+  virtual std::optional<std::int64_t> findByContentKey(const std::string& key) const = 0;
+  // A whole texture (pixels, features, lattice), or nothing for an unknown id.
+  virtual std::optional<TextureRecord> texture(std::int64_t id) const = 0;
+  // The CCVs of textures with id > after_id, ascending (to build or extend a CcvIndex).
+  virtual std::vector<CcvEntry> ccvVectors(std::int64_t after_id = 0) const = 0;
+  virtual std::vector<TextureSummary> textures() const = 0;
+  // The instances of one run, or of every run.
+  virtual std::vector<TextureInstance> instances(std::optional<std::int64_t> run_id = {}) const = 0;
+  virtual std::vector<RunRecord> runs() const = 0;
+  virtual StoreStats stats() const = 0;
+};
+
+struct OpenOptions {
+  bool create = true;      // create the file (and schema) when it does not exist
+  bool read_only = false;  // never write (db list, db show)
+};
+
+// Opens the SQLite database at `path`. Throws core::Error naming the file when it is not a
+// tessera database, is corrupt, was written by a newer schema, or cannot be created.
+std::unique_ptr<TextureStore> openSqliteStore(const std::filesystem::path& path,
+                                              const OpenOptions& options = {});
+
+// A location from the command line: a file path opens SQLite; a postgresql:// URL is refused
+// with a clear message until that backend exists.
+std::unique_ptr<TextureStore> openTextureStore(const std::string& location,
+                                               const OpenOptions& options = {});
+
+}  // namespace tessera::db

@@ -1,0 +1,26 @@
+#pragma once
+// Zero-mean normalised cross-correlation of a tile at every offset inside an image, normalised
+// per window (the image's mean and spread under the tile at that offset, not over the whole
+// image), computed in the frequency domain: OpenCV's matchTemplate with TM_CCOEFF_NORMED,
+// which correlates by DFT and normalises each window from integral images.
+#include <opencv2/core/mat.hpp>
+
+namespace tessera::match {
+
+struct CorrelationPeak {
+  int x = 0, y = 0;     // top-left corner of the best placement of the tile in the image
+  double score = -1.0;  // its NCC in [-1, 1]
+};
+
+// Grey float image of an RGB bitmap (CV_8UC3); texels outside `mask` (CV_8UC1, 0 = outside;
+// empty: none) take the mean grey of those inside, so they add no structure.
+cv::Mat greyForCorrelation(const cv::Mat& rgb, const cv::Mat& mask);
+
+// The NCC of `tile` at every placement inside `image` (both CV_32FC1 from greyForCorrelation;
+// the tile no larger than the image): a (H - h + 1) x (W - w + 1) CV_32FC1 map.
+cv::Mat normalisedCrossCorrelation(const cv::Mat& image, const cv::Mat& tile);
+
+// The highest peak of that map. A flat window (no variance) scores 0.
+CorrelationPeak findTile(const cv::Mat& image, const cv::Mat& tile);
+
+}  // namespace tessera::match

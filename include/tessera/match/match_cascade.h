@@ -1,0 +1,118 @@
+#pragma once
+// The matching cascade, cheapest first: the CCV prefilter removes stored textures whose colour
+// coherence is too far from the new bitmap's; pattern textures left are looked for by
+// normalised cross-correlation (at four quarter turns, since two patches' grids may be turned
+// against each other), single textures by features and a RANSAC similarity. Every transform a
+// stage proposes is verified by fidelity: the stored texture rendered through it onto the new
+// patch's grid must reach min_psnr_db over its mask and cover min_coverage of it. The first
+// candidate, in CCV order, that passes is the match; else there is none.
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <opencv2/core/mat.hpp>
+
+#include "tessera/core/similarity2.h"
+#include "tessera/match/ccv.h"
+#include "tessera/match/ccv_index.h"
+#include "tessera/match/feature_matcher.h"
+
+namespace tessera::match {
+
+struct MatchConfig {
+  CcvConfig ccv;
+  FeatureConfig features;
+  double ccv_max_distance = 0.6;   // the prefilter: candidates farther than this are removed
+  std::size_t max_candidates = 8;  // at most this many, nearest first, go on to NCC/features
+  double ncc_min_score = 0.5;      // a pattern tile must correlate at least this well
+  double min_psnr_db = 24.0;       // fidelity of an accepted reuse
+  double min_coverage = 0.85;      // share of the patch mask a single texture must cover
+  // Bitmaps longer than this (pixels) are described (CCV, features) at this size: a wall's
+  // 1000-texel bitmap costs 4 times less, and keypoints are scaled back to full size.
+  int describe_max_px = 640;
+};
+
+// A bitmap as the cascade sees it, computed once per new bitmap (and stored with a texture).
+struct TextureDescription {
+  cv::Mat rgb;   // CV_8UC3
+  cv::Mat mask;  // CV_8UC1, 255 = valid
+  Ccv ccv;
+  Features features;
+};
+TextureDescription describeTexture(const cv::Mat& rgb, const cv::Mat& mask,
+                                   const MatchConfig& config);
+
+struct StoredTexture {
+  std::int64_t id = 0;
+  bool pattern = false;  // a tile that repeats
+  TextureDescription description;
+};
+
+// Where candidates come from: the database through its CCV index, or a list in memory.
+class TextureCatalog {
+ public:
+  virtual ~TextureCatalog() = default;
+  // Textures the prefilter considers.
+  virtual std::size_t size() const = 0;
+  // At most k textures within max_distance of `ccv`, nearest first (ties: lower id first).
+  virtual std::vector<CcvNeighbour> nearest(const std::vector<float>& ccv, double max_distance,
+                                            std::size_t k) const = 0;
+  // A texture the prefilter named (nothing if it is gone).
+  virtual std::shared_ptr<const StoredTexture> load(std::int64_t id) const = 0;
+};
+
+// A catalog held in memory: tests, benches, `tessera match`, and the commit stage's re-check.
+class MemoryCatalog : public TextureCatalog {
+ public:
+  explicit MemoryCatalog(const CcvConfig& ccv = {});
+  void add(std::shared_ptr<const StoredTexture> texture);
+  std::size_t size() const override { return textures_.size(); }
+  std::vector<CcvNeighbour> nearest(const std::vector<float>& ccv, double max_distance,
+                                    std::size_t k) const override;
+  std::shared_ptr<const StoredTexture> load(std::int64_t id) const override;
+
+ private:
+  CcvIndex index_;
+  std::vector<std::shared_ptr<const StoredTexture>> textures_;  // ascending id
+};
+
+// How one candidate fared.
+struct CandidateVerdict {
+  std::int64_t id = 0;
+  double ccv_distance = 0.0;
+  std::string method;  // "ncc" or "features"
+  bool accepted = false;
+  std::optional<core::Similarity2> transform;  // new patch texel -> stored texture pixel
+  double psnr_db = 0.0, coverage = 0.0;
+  std::string reason;  // why it was refused
+};
+
+struct MatchDecision {
+  std::size_t considered = 0;              // textures the prefilter looked at
+  std::size_t passed_ccv = 0;              // ... and let through
+  std::vector<CandidateVerdict> verdicts;  // in CCV order, up to the accepted one
+  std::optional<CandidateVerdict> match;   // the accepted one
+  double ms = 0.0;
+};
+
+class MatchCascade {
+ public:
+  explicit MatchCascade(const MatchConfig& config = {}) : config_(config) {}
+  const MatchConfig& config() const { return config_; }
+
+  // Runs the cascade for a new bitmap against the catalog. Thread-safe.
+  MatchDecision match(const TextureDescription& query, const TextureCatalog& catalog) const;
+  // Verifies one candidate (NCC or features, then fidelity).
+  CandidateVerdict tryCandidate(const TextureDescription& query, const StoredTexture& stored,
+                                double ccv_distance) const;
+
+ private:
+  std::optional<core::Similarity2> findPattern(const TextureDescription& query,
+                                               const StoredTexture& stored,
+                                               CandidateVerdict& verdict) const;
+  MatchConfig config_;
+};
+
+}  // namespace tessera::match

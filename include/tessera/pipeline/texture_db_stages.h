@@ -1,0 +1,155 @@
+#pragma once
+// The stages after texturing: each new bitmap is matched against the texture database (many
+// at once, each holding a read snapshot of the CCV index), then committed one at a time in
+// finalization order. The commit stage re-checks the bitmap against the textures committed
+// since its matcher's snapshot, so that the same texture is never stored twice and the result
+// does not depend on how many threads ran.
+#include <chrono>
+#include <cstddef>
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <shared_mutex>
+#include <vector>
+
+#include "tessera/db/texture_store.h"
+#include "tessera/match/match_cascade.h"
+#include "tessera/pipeline/stage_timer.h"
+#include "tessera/pipeline/stages.h"
+#include "tessera/planes/patch_map.h"
+#include "tessera/texture/bitmap_builder.h"
+
+namespace tessera::pipeline {
+
+using SteadyTime = std::chrono::steady_clock::time_point;
+
+// A patch the plane stage finalized, numbered in finalization order; `batch` groups the
+// patches finalized by one frame (or by the end of the stream).
+struct PatchJob {
+  std::size_t sequence = 0;
+  std::size_t batch = 0;
+  std::size_t batch_size = 0;
+  std::uint64_t frame_index = 0;
+  planes::PatchSnapshot patch;
+  SteadyTime finalized_at;
+};
+
+// A patch's bitmap, its description and the matcher's decision.
+struct MatchedPatch {
+  std::size_t sequence = 0;
+  std::size_t batch = 0;
+  std::size_t batch_size = 0;
+  std::uint64_t frame_index = 0;
+  std::optional<texture::PatchBitmap> bitmap;  // nothing when it could not be built
+  std::optional<match::TextureDescription> description;
+  match::MatchDecision decision;
+  double describe_ms = 0.0;      // CCV and features of the new bitmap
+  std::int64_t snapshot_id = 0;  // the newest texture the matcher could see
+  SteadyTime finalized_at;
+
+  struct Batch {
+    std::size_t index = 0, size = 0;
+    std::uint64_t frame_index = 0;
+  };
+  Batch batchInfo() const { return {batch, batch_size, frame_index}; }
+};
+
+// The texel mask of a bitmap: observed and inpainted texels.
+cv::Mat validTexels(const texture::PatchBitmap& bitmap);
+
+// The database's textures as the cascade sees them: their CCVs in an index, the textures
+// themselves loaded on demand (and kept). Readers hold readLock() for the whole of a match;
+// the commit stage adds under the write lock.
+class StoreCatalog : public match::TextureCatalog {
+ public:
+  StoreCatalog(const db::TextureStore& store, const match::MatchConfig& config);
+
+  std::shared_lock<std::shared_mutex> readLock() const { return std::shared_lock(mutex_); }
+  std::int64_t newestId() const { return newest_id_; }  // under readLock()
+  std::size_t size() const override { return size_; }
+  std::vector<match::CcvNeighbour> nearest(const std::vector<float>& ccv, double max_distance,
+                                           std::size_t k) const override;
+  std::shared_ptr<const match::StoredTexture> load(std::int64_t id) const override;
+
+  // After a commit: takes the write lock.
+  void add(std::shared_ptr<const match::StoredTexture> texture);
+
+ private:
+  const db::TextureStore& store_;
+  match::MatchConfig config_;
+  mutable std::shared_mutex mutex_;
+  match::CcvIndex index_;
+  std::size_t size_ = 0;
+  std::int64_t newest_id_ = 0;
+  mutable std::mutex cache_mutex_;
+  mutable std::map<std::int64_t, std::shared_ptr<const match::StoredTexture>> cache_;
+};
+
+// A database record as the cascade sees it; features are recomputed when the record's were
+// made by another detector.
+std::shared_ptr<const match::StoredTexture> storedTextureOf(const db::TextureRecord& record,
+                                                            const match::MatchConfig& config);
+
+// Builds each patch's bitmap, describes it and matches it (thread-safe: many at once).
+class MatchStage {
+ public:
+  MatchStage(const TextureStage& textures, const match::MatchCascade& cascade,
+             const StoreCatalog& catalog)
+      : textures_(textures), cascade_(cascade), catalog_(catalog) {}
+  MatchedPatch process(const PatchJob& job) const;
+
+ private:
+  const TextureStage& textures_;
+  const match::MatchCascade& cascade_;
+  const StoreCatalog& catalog_;
+};
+
+// What one commit decided, for stats.jsonl.
+struct CommitRecord {
+  int patch_id = 0, version = 0;
+  std::optional<db::TextureInstance> instance;  // nothing: no bitmap, or the commit failed
+  std::string method;                           // "ncc", "features", "same pixels", "stored"
+  std::size_t ccv_considered = 0, ccv_removed = 0;
+  double bitmap_ms = 0.0, describe_ms = 0.0, match_ms = 0.0, commit_latency_ms = 0.0;
+};
+
+// Serial, in finalization order: re-check, store, remember the map's instances.
+class CommitStage {
+ public:
+  CommitStage(db::TextureStore& store, StoreCatalog& catalog, const match::MatchCascade& cascade,
+              std::int64_t run_id);
+
+  CommitRecord process(MatchedPatch matched);
+
+  // The newest instance of each patch id, and the textures they use (pixels per texture).
+  const std::map<int, db::TextureInstance>& instances() const { return instances_; }
+  const std::map<std::int64_t, std::size_t>& texturePixels() const { return texture_pixels_; }
+  std::size_t texturesStored() const { return textures_stored_; }
+  std::size_t commitFailures() const { return commit_failures_; }
+  std::size_t ccvConsidered() const { return ccv_considered_; }
+  std::size_t ccvRemoved() const { return ccv_removed_; }
+  const std::vector<double>& commitLatenciesMs() const { return commit_latencies_ms_; }
+  const StageTimer& matchTimer() const { return match_timer_; }
+  const StageTimer& timer() const { return timer_; }
+
+ private:
+  // The cascade over textures committed after the matcher's snapshot, nearer in CCV than the
+  // candidate it accepted (all of them when it accepted none).
+  std::optional<match::CandidateVerdict> recheck(const MatchedPatch& matched) const;
+
+  db::TextureStore& store_;
+  StoreCatalog& catalog_;
+  const match::MatchCascade& cascade_;
+  std::int64_t run_id_;
+  std::vector<std::shared_ptr<const match::StoredTexture>> committed_;  // this run, ascending id
+  std::map<int, db::TextureInstance> instances_;
+  std::map<std::int64_t, std::size_t> texture_pixels_;
+  std::size_t textures_stored_ = 0, commit_failures_ = 0;
+  std::size_t ccv_considered_ = 0, ccv_removed_ = 0;
+  std::vector<double> commit_latencies_ms_;
+  StageTimer match_timer_, timer_;
+};
+
+}  // namespace tessera::pipeline

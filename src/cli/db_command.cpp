@@ -1,0 +1,245 @@
+#include "db_command.h"
+
+#include <filesystem>
+#include <fstream>
+
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+#include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "tessera/core/error.h"
+#include "tessera/db/texture_store.h"
+#include "tessera/match/match_cascade.h"
+#include "tessera/pipeline/run_config.h"
+#include "tessera/texture/bitmap_export.h"
+
+namespace tessera::cli {
+
+namespace {
+
+nlohmann::json summaryJson(const db::TextureSummary& t) {
+  return {{"id", t.id},
+          {"kind", db::kindName(t.kind)},
+          {"width", t.width},
+          {"height", t.height},
+          {"run_id", t.run_id},
+          {"source_patch", t.source_patch},
+          {"name", t.name},
+          {"uses", t.uses},
+          {"png_bytes", t.png_bytes}};
+}
+
+std::string provenance(const db::TextureSummary& t) {
+  if (!t.name.empty()) return t.name;
+  return fmt::format("run {} patch {}", t.run_id, t.source_patch);
+}
+
+int list(const db::TextureStore& store, bool json) {
+  const std::vector<db::TextureSummary> textures = store.textures();
+  if (json) {
+    nlohmann::json out = nlohmann::json::array();
+    for (const auto& t : textures) out.push_back(summaryJson(t));
+    fmt::print("{}\n", out.dump(2));
+    return 0;
+  }
+  fmt::print("{:>6}  {:<8} {:>11}  {:>5}  {:>9}  {}\n", "id", "kind", "size", "uses", "PNG KB",
+             "from");
+  for (const auto& t : textures) {
+    fmt::print("{:>6}  {:<8} {:>5}x{:<5}  {:>5}  {:>9.1f}  {}\n", t.id, db::kindName(t.kind),
+               t.width, t.height, t.uses, static_cast<double>(t.png_bytes) / 1e3, provenance(t));
+  }
+  fmt::print("{} textures\n", textures.size());
+  return 0;
+}
+
+int show(const db::TextureStore& store, std::int64_t id, bool json) {
+  const std::optional<db::TextureRecord> record = store.texture(id);
+  if (!record) {
+    spdlog::error("{}: no texture {}", store.location(), id);
+    return 1;
+  }
+  nlohmann::json uses = nlohmann::json::array();
+  for (const db::TextureInstance& i : store.instances()) {
+    if (i.texture_id != id) continue;
+    uses.push_back({{"run_id", i.run_id},
+                    {"patch_id", i.patch_id},
+                    {"version", i.version},
+                    {"transform", {i.transform.a, i.transform.b, i.transform.tx, i.transform.ty}},
+                    {"angle_deg", i.transform.angleRad() * 180.0 / M_PI},
+                    {"scale", i.transform.scale()},
+                    {"reused", i.reused},
+                    {"psnr_db", i.psnr_db ? nlohmann::json(*i.psnr_db) : nullptr}});
+  }
+  nlohmann::json out = {{"id", record->id},
+                        {"kind", db::kindName(record->kind)},
+                        {"width", record->rgb.cols},
+                        {"height", record->rgb.rows},
+                        {"valid_texels", cv::countNonZero(record->mask)},
+                        {"texel_m", record->texel_m},
+                        {"features", record->feature_kind},
+                        {"keypoints", record->keypoints.size()},
+                        {"ccv_length", record->ccv.size()},
+                        {"content_key", record->content_key},
+                        {"run_id", record->run_id},
+                        {"source_patch", record->source_patch},
+                        {"name", record->name},
+                        {"instances", uses}};
+  out["lattice"] = record->lattice
+                       ? nlohmann::json{{"v1", {record->lattice->v1.x(), record->lattice->v1.y()}},
+                                        {"v2", {record->lattice->v2.x(), record->lattice->v2.y()}}}
+                       : nlohmann::json(nullptr);
+  if (json) {
+    fmt::print("{}\n", out.dump(2));
+  } else {
+    for (const auto& [key, value] : out.items()) {
+      if (key != "instances") fmt::print("{}: {}\n", key, value.dump());
+    }
+    fmt::print("instances: {}\n", uses.size());
+    for (const auto& use : uses) fmt::print("  {}\n", use.dump());
+  }
+  return 0;
+}
+
+int exportAll(const db::TextureStore& store, const std::filesystem::path& out_dir) {
+  std::error_code ec;
+  std::filesystem::create_directories(out_dir, ec);
+  if (ec)
+    throw core::Error(fmt::format("{}: cannot be created: {}", out_dir.string(), ec.message()));
+  nlohmann::json index = nlohmann::json::array();
+  for (const db::TextureSummary& t : store.textures()) {
+    const std::optional<db::TextureRecord> record = store.texture(t.id);
+    if (!record) continue;
+    const std::string file = fmt::format("texture_{}.png", t.id);
+    texture::writeRgbaPng(out_dir / file, record->rgb, record->mask);
+    nlohmann::json entry = summaryJson(t);
+    entry["file"] = file;
+    index.push_back(entry);
+  }
+  const std::filesystem::path index_path = out_dir / "textures.json";
+  std::ofstream out(index_path);
+  out << index.dump(2) << '\n';
+  out.close();
+  if (!out) throw core::Error(fmt::format("{}: could not be written", index_path.string()));
+  fmt::print("{} textures written to {}\n", index.size(), out_dir.string());
+  return 0;
+}
+
+int import(db::TextureStore& store, const DbArguments& args) {
+  const pipeline::RunConfig config = pipeline::loadRunConfig(
+      args.config.empty() ? std::nullopt : std::optional<std::filesystem::path>(args.config));
+  for (const std::string& path : args.images) {
+    const cv::Mat image = cv::imread(path, cv::IMREAD_UNCHANGED);
+    if (image.empty()) throw core::Error(fmt::format("{}: not an image OpenCV can read", path));
+    cv::Mat rgb, mask;
+    if (image.channels() == 4) {
+      cv::cvtColor(image, rgb, cv::COLOR_BGRA2RGB);
+      cv::extractChannel(image, mask, 3);
+      cv::threshold(mask, mask, 0, 255, cv::THRESH_BINARY);
+    } else {
+      cv::cvtColor(image, rgb, image.channels() == 1 ? cv::COLOR_GRAY2RGB : cv::COLOR_BGR2RGB);
+      mask = cv::Mat(rgb.size(), CV_8UC1, cv::Scalar(255));
+    }
+    if (rgb.depth() != CV_8U) throw core::Error(fmt::format("{}: not an 8-bit image", path));
+    const match::TextureDescription description = match::describeTexture(rgb, mask, config.match);
+    db::TextureRecord record;
+    record.kind = args.pattern ? db::TextureKind::kPattern : db::TextureKind::kSingle;
+    record.rgb = rgb;
+    record.mask = mask;
+    record.ccv = description.ccv.values;
+    record.feature_kind = description.features.kind;
+    record.keypoints = description.features.keypoints;
+    record.descriptors = description.features.descriptors;
+    if (args.pattern) {  // the image is one period in each direction
+      record.lattice = db::Lattice{{rgb.cols, 0.0}, {0.0, rgb.rows}};
+    }
+    record.content_key = db::contentKey(rgb, mask);
+    record.name = std::filesystem::path(path).filename().string();
+    const std::optional<std::int64_t> existing = store.findByContentKey(record.content_key);
+    if (existing) {
+      fmt::print("{}: already stored as texture {}\n", path, *existing);
+      continue;
+    }
+    const std::vector<std::int64_t> ids = store.commit({{record}, {}});
+    fmt::print("{}: texture {} ({}, {}x{}, {} keypoints)\n", path, ids.at(0),
+               db::kindName(record.kind), rgb.cols, rgb.rows, record.keypoints.size());
+  }
+  return 0;
+}
+
+int stats(const db::TextureStore& store, bool json) {
+  const db::StoreStats s = store.stats();
+  const nlohmann::json out = {{"location", store.location()},
+                              {"schema_version", s.schema_version},
+                              {"textures", s.textures},
+                              {"patterns", s.patterns},
+                              {"instances", s.instances},
+                              {"runs", s.runs},
+                              {"texture_pixels", s.texture_pixels},
+                              {"texture_mb_rgb", 3e-6 * static_cast<double>(s.texture_pixels)},
+                              {"file_bytes", s.file_bytes}};
+  if (json) {
+    fmt::print("{}\n", out.dump(2));
+  } else {
+    for (const auto& [key, value] : out.items()) fmt::print("{}: {}\n", key, value.dump());
+  }
+  return 0;
+}
+
+}  // namespace
+
+CLI::App* addDbCommand(CLI::App& app, DbArguments& args) {
+  CLI::App* db = app.add_subcommand("db", "Look into, export or fill a texture database");
+  db->require_subcommand(1);
+  auto add_db = [&args](CLI::App* sub, bool must_exist) {
+    CLI::Option* option =
+        sub->add_option("DB", args.db, "Texture database (SQLite file)")->required();
+    if (must_exist) option->check(CLI::ExistingFile);
+  };
+  CLI::App* list = db->add_subcommand("list", "One line per texture: kind, size, uses, origin");
+  add_db(list, true);
+  list->add_flag("--json", args.json, "Print a JSON array");
+  CLI::App* show = db->add_subcommand("show", "Everything about one texture and its instances");
+  add_db(show, true);
+  show->add_option("ID", args.texture_id, "Texture id (as db list shows)")->required();
+  show->add_flag("--json", args.json, "Print a JSON object");
+  CLI::App* exp = db->add_subcommand(
+      "export", "Write every texture as an RGBA PNG (alpha: valid texels) and textures.json");
+  add_db(exp, true);
+  exp->add_option("DIR", args.out_dir, "Folder to write to (created if needed)")->required();
+  CLI::App* imp = db->add_subcommand(
+      "import", "Add standard textures (images) to a database, created if missing");
+  add_db(imp, false);
+  imp->add_option("IMAGES", args.images, "Image files (PNG, JPEG, ...; alpha marks valid texels)")
+      ->required()
+      ->check(CLI::ExistingFile);
+  imp->add_flag("--pattern", args.pattern,
+                "Each image is one tile of a repeating pattern (found in new bitmaps by "
+                "cross-correlation and repeated over the patch)");
+  imp->add_option("--config", args.config, "YAML config whose match: keys describe the textures")
+      ->check(CLI::ExistingFile);
+  CLI::App* st = db->add_subcommand("stats", "Schema version, counts and sizes");
+  add_db(st, true);
+  st->add_flag("--json", args.json, "Print a JSON object");
+  return db;
+}
+
+int dbCommand(const CLI::App& db, const DbArguments& args) {
+  try {
+    const auto parsed = [&db](const char* name) { return db.get_subcommand(name)->parsed(); };
+    const bool writes = parsed("import");
+    const std::unique_ptr<db::TextureStore> store =
+        db::openTextureStore(args.db, {writes, !writes});
+    if (parsed("list")) return list(*store, args.json);
+    if (parsed("show")) return show(*store, args.texture_id, args.json);
+    if (parsed("export")) return exportAll(*store, args.out_dir);
+    if (parsed("import")) return import(*store, args);
+    return stats(*store, args.json);
+  } catch (const core::Error& e) {
+    spdlog::error("{}", e.what());
+    return 1;
+  }
+}
+
+}  // namespace tessera::cli

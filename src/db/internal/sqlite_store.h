@@ -1,0 +1,67 @@
+#pragma once
+// The SQLite texture store: one writer connection behind a mutex, and a pool of read-only
+// connections so that reads run (each on its WAL snapshot) while a commit is being written.
+// Opening, the pool and the writes are in sqlite_store.cpp, the reads in sqlite_store_reads.cpp.
+//
+// Thread-safety: every method may be called from any number of threads at once. Writes are
+// serialised by write_mutex_; a read borrows a connection of its own from the pool.
+#include <filesystem>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <vector>
+
+#include "internal/sqlite_connection.h"
+#include "tessera/db/texture_store.h"
+
+namespace tessera::db::internal {
+
+struct EncodedTexture;
+
+class SqliteStore final : public TextureStore {
+ public:
+  SqliteStore(const std::filesystem::path& path, const OpenOptions& options);
+  ~SqliteStore() override;
+
+  std::string location() const override { return location_; }
+  std::int64_t beginRun(const std::string& source) override;
+  void finishRun(std::int64_t run_id) override;
+  std::vector<std::int64_t> commit(const Commit& commit) override;
+
+  std::optional<std::int64_t> findByContentKey(const std::string& key) const override;
+  std::optional<TextureRecord> texture(std::int64_t id) const override;
+  std::vector<CcvEntry> ccvVectors(std::int64_t after_id) const override;
+  std::vector<TextureSummary> textures() const override;
+  std::vector<TextureInstance> instances(std::optional<std::int64_t> run_id) const override;
+  std::vector<RunRecord> runs() const override;
+  StoreStats stats() const override;
+
+ private:
+  // A pooled read-only connection, lent for one read and given back when the lease ends.
+  class ReadLease {
+   public:
+    explicit ReadLease(const SqliteStore& store);
+    ~ReadLease();
+    ReadLease(const ReadLease&) = delete;
+    ReadLease& operator=(const ReadLease&) = delete;
+    Connection& operator*() const { return *connection_; }
+
+   private:
+    const SqliteStore& store_;
+    std::unique_ptr<Connection> connection_;
+  };
+
+  // The writer connection; the caller holds write_mutex_. Throws for a read-only store.
+  Connection& writer();
+  std::vector<std::int64_t> writeCommit(const Commit& commit,
+                                        const std::vector<EncodedTexture>& encoded);
+
+  std::filesystem::path path_;
+  std::string location_;
+  std::mutex write_mutex_;
+  std::unique_ptr<Connection> writer_;  // null when read-only
+  mutable std::mutex pool_mutex_;
+  mutable std::vector<std::unique_ptr<Connection>> pool_;
+};
+
+}  // namespace tessera::db::internal

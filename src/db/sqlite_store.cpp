@@ -1,0 +1,295 @@
+// Opening, the reader pool and the writes of the SQLite store (internal/sqlite_store.h).
+#include "internal/sqlite_store.h"
+
+#include <utility>
+
+#include <fmt/format.h>
+
+#include "internal/sqlite_schema.h"
+#include "internal/texture_codec.h"
+#include "tessera/core/error.h"
+
+namespace tessera::db {
+namespace internal {
+
+// A texture's columns, encoded before the writer lock is taken (PNG encoding is the slow part).
+struct EncodedTexture {
+  const TextureRecord* record = nullptr;
+  std::string content_key;
+  Bytes png, ccv, keypoints, descriptors;
+};
+
+namespace {
+
+EncodedTexture encode(const TextureRecord& record, const std::string& location, std::size_t index) {
+  const auto refuse = [&](const char* why) {
+    return core::Error(
+        fmt::format("{}: cannot commit texture {} of the commit: {}", location, index, why));
+  };
+  if (record.rgb.empty() || record.rgb.type() != CV_8UC3) throw refuse("rgb is not CV_8UC3");
+  if (!record.mask.empty() &&
+      (record.mask.type() != CV_8UC1 || record.mask.size() != record.rgb.size())) {
+    throw refuse("mask is not CV_8UC1 of the rgb's size");
+  }
+  if (!record.descriptors.empty() &&
+      static_cast<std::size_t>(record.descriptors.rows) != record.keypoints.size()) {
+    throw refuse("descriptors need one row per keypoint");
+  }
+  EncodedTexture encoded;
+  encoded.record = &record;
+  // Always computed here, never taken from the record, so that the key matches the pixels.
+  encoded.content_key = contentKey(record.rgb, record.mask);
+  encoded.png = encodePng(record.rgb, record.mask);
+  encoded.ccv = encodeFloats(record.ccv);
+  encoded.keypoints = encodeKeypoints(record.keypoints);
+  encoded.descriptors = encodeDescriptors(record.descriptors);
+  return encoded;
+}
+
+constexpr const char* kInsertTexture =
+    "INSERT INTO textures (kind, width, height, texel_m, png, ccv, feature_kind, keypoints, "
+    "descriptors, lattice_v1x, lattice_v1y, lattice_v2x, lattice_v2y, content_key, run_id, "
+    "source_patch, name) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)";
+
+// A newer or equal version of the patch replaces the stored instance; an older one (arriving
+// late) is ignored, so the row always holds the patch's latest texture.
+constexpr const char* kUpsertInstance =
+    "INSERT INTO instances (run_id, patch_id, version, texture_id, a, b, tx, ty, psnr_db, reused) "
+    "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?) ON CONFLICT (run_id, patch_id) DO UPDATE SET "
+    "version = excluded.version, texture_id = excluded.texture_id, a = excluded.a, "
+    "b = excluded.b, tx = excluded.tx, ty = excluded.ty, psnr_db = excluded.psnr_db, "
+    "reused = excluded.reused WHERE excluded.version >= instances.version";
+
+std::int64_t insertTexture(Statement& insert, Connection& db, const EncodedTexture& encoded) {
+  const TextureRecord& r = *encoded.record;
+  insert.reset();
+  insert.bind(1, std::string(kindName(r.kind)))
+      .bind(2, std::int64_t{r.rgb.cols})
+      .bind(3, std::int64_t{r.rgb.rows})
+      .bind(4, r.texel_m)
+      .bindBlob(5, encoded.png.data(), encoded.png.size())
+      .bindBlob(6, encoded.ccv.data(), encoded.ccv.size())
+      .bind(7, r.feature_kind)
+      .bindBlob(8, encoded.keypoints.data(), encoded.keypoints.size())
+      .bindBlob(9, encoded.descriptors.data(), encoded.descriptors.size());
+  if (r.lattice) {
+    insert.bind(10, r.lattice->v1.x()).bind(11, r.lattice->v1.y());
+    insert.bind(12, r.lattice->v2.x()).bind(13, r.lattice->v2.y());
+  }  // else the lattice columns stay NULL (reset() clears bindings)
+  insert.bind(14, encoded.content_key);
+  if (r.run_id != 0) insert.bind(15, r.run_id);
+  insert.bind(16, std::int64_t{r.source_patch}).bind(17, r.name).run();
+  return db.lastInsertId();
+}
+
+bool rowExists(Statement& query, std::int64_t id) {
+  query.reset();
+  query.bind(1, id);
+  return query.step();
+}
+
+}  // namespace
+
+SqliteStore::SqliteStore(const std::filesystem::path& path, const OpenOptions& options)
+    : path_(path), location_(path.string()) {
+  if (sqlite3_threadsafe() == 0) {
+    throw core::Error(location_ + ": this SQLite library was built without thread support");
+  }
+  const FileState state = inspectFile(path_);
+  if (state != FileState::kDatabase) {
+    const bool missing = state == FileState::kMissing;
+    if (options.read_only || !options.create) {
+      throw core::Error(fmt::format(
+          "{}: {}", location_,
+          missing ? "no such texture database" : "an empty file, not a texture database"));
+    }
+    const std::filesystem::path folder = path_.parent_path();
+    if (!folder.empty() && !std::filesystem::is_directory(folder)) {
+      throw core::Error(
+          fmt::format("{}: cannot create the database: no folder {}", location_, folder.string()));
+    }
+    writer_ = std::make_unique<Connection>(path_, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE);
+    configureWriter(*writer_);
+    createSchema(*writer_);
+    return;
+  }
+  // Checked through a read-only connection first: a file this build must refuse (a newer
+  // schema, another application's) is never written to, not even to switch it to WAL.
+  auto checker = std::make_unique<Connection>(path_, SQLITE_OPEN_READONLY);
+  configureReader(*checker);
+  checkSchema(*checker);
+  if (!options.read_only) {
+    writer_ = std::make_unique<Connection>(path_, SQLITE_OPEN_READWRITE);
+    if (sqlite3_db_readonly(writer_->handle(), "main") == 1) {
+      throw core::Error(location_ +
+                        ": cannot write to it (read-only file or folder); open it "
+                        "read-only to read it");
+    }
+    configureWriter(*writer_);
+  }
+  pool_.push_back(std::move(checker));
+}
+
+SqliteStore::~SqliteStore() {
+  // Readers first: the last connection to close checkpoints the WAL into the main file and
+  // removes it, which only the writer can do.
+  pool_.clear();
+  if (writer_) {
+    // Back to a rollback journal as the writer leaves: the file then stands alone, and a
+    // read-only open (db list, db show) creates no -wal and -shm beside it, as it would for a
+    // WAL database. The read first makes the writer open the WAL itself, without which leaving
+    // WAL mode leaves the -wal and -shm its readers opened. While another process has the
+    // database open this fails at once (it needs an exclusive lock) and the file stays in WAL.
+    sqlite3_busy_timeout(writer_->handle(), 0);
+    sqlite3_exec(writer_->handle(),
+                 "SELECT count(*) FROM sqlite_master; PRAGMA journal_mode = DELETE", nullptr,
+                 nullptr, nullptr);
+  }
+  writer_.reset();
+}
+
+SqliteStore::ReadLease::ReadLease(const SqliteStore& store) : store_(store) {
+  {
+    const std::lock_guard lock(store.pool_mutex_);
+    if (!store.pool_.empty()) {
+      connection_ = std::move(store.pool_.back());
+      store.pool_.pop_back();
+      return;
+    }
+  }
+  // Opened outside the lock: opening reads the file, and other readers need not wait for it.
+  connection_ = std::make_unique<Connection>(store.path_, SQLITE_OPEN_READONLY);
+  configureReader(*connection_);
+}
+
+SqliteStore::ReadLease::~ReadLease() {
+  connection_->rollbackQuietly();  // ends a read transaction an exception left open
+  const std::lock_guard lock(store_.pool_mutex_);
+  store_.pool_.push_back(std::move(connection_));
+}
+
+Connection& SqliteStore::writer() {
+  if (!writer_) throw core::Error(location_ + ": opened read-only; cannot write");
+  return *writer_;
+}
+
+std::int64_t SqliteStore::beginRun(const std::string& source) {
+  const std::lock_guard lock(write_mutex_);
+  Connection& db = writer();
+  Statement insert(db,
+                   "INSERT INTO runs (started_utc, source, finished) VALUES "
+                   "(strftime('%Y-%m-%dT%H:%M:%SZ', 'now'), ?, 0)");
+  insert.bind(1, source).run();
+  return db.lastInsertId();
+}
+
+void SqliteStore::finishRun(std::int64_t run_id) {
+  const std::lock_guard lock(write_mutex_);
+  Connection& db = writer();
+  Statement update(db, "UPDATE runs SET finished = 1 WHERE id = ?");
+  update.bind(1, run_id).run();
+  if (db.changes() == 0) throw core::Error(fmt::format("{}: no run {}", location_, run_id));
+}
+
+std::vector<std::int64_t> SqliteStore::commit(const Commit& commit) {
+  std::vector<EncodedTexture> encoded;
+  encoded.reserve(commit.textures.size());
+  for (std::size_t i = 0; i < commit.textures.size(); ++i) {
+    encoded.push_back(encode(commit.textures[i], location_, i));
+  }
+  const std::lock_guard lock(write_mutex_);
+  Connection& db = writer();
+  // IMMEDIATE takes the write lock up front, so another process cannot make the transaction
+  // fail half-way with SQLITE_BUSY.
+  db.exec("BEGIN IMMEDIATE");
+  try {
+    std::vector<std::int64_t> ids = writeCommit(commit, encoded);
+    db.exec("COMMIT");
+    return ids;
+  } catch (const std::exception& e) {
+    db.rollbackQuietly();
+    throw core::Error(
+        fmt::format("{} (the commit was rolled back; nothing of it is stored)", e.what()));
+  }
+}
+
+std::vector<std::int64_t> SqliteStore::writeCommit(const Commit& commit,
+                                                   const std::vector<EncodedTexture>& encoded) {
+  Connection& db = *writer_;
+  Statement find(db, "SELECT id FROM textures WHERE content_key = ?");
+  Statement insert(db, kInsertTexture);
+  std::vector<std::int64_t> ids;
+  ids.reserve(encoded.size());
+  for (const EncodedTexture& texture : encoded) {
+    // The same pixels are stored once: an existing texture (from any commit, or earlier in
+    // this one) is reused. The UNIQUE content_key makes a duplicate impossible regardless.
+    find.reset();
+    find.bind(1, texture.content_key);
+    ids.push_back(find.step() ? find.int64(0) : insertTexture(insert, db, texture));
+  }
+
+  Statement texture_exists(db, "SELECT 1 FROM textures WHERE id = ?");
+  Statement run_exists(db, "SELECT 1 FROM runs WHERE id = ?");
+  Statement upsert(db, kUpsertInstance);
+  for (const TextureInstance& instance : commit.instances) {
+    std::int64_t texture_id = instance.texture_id;
+    if (texture_id < 0) {
+      const auto index = static_cast<std::size_t>(-(texture_id + 1));
+      if (index >= ids.size()) {
+        throw core::Error(
+            fmt::format("{}: the instance of patch {} refers to new texture {}, "
+                        "but the commit has {}",
+                        location_, instance.patch_id, index, ids.size()));
+      }
+      texture_id = ids[index];
+    } else if (!rowExists(texture_exists, texture_id)) {
+      // The foreign key would refuse it too, but without saying which.
+      throw core::Error(
+          fmt::format("{}: the instance of patch {} refers to texture {}, which "
+                      "is not stored",
+                      location_, instance.patch_id, texture_id));
+    }
+    if (!rowExists(run_exists, instance.run_id)) {
+      throw core::Error(
+          fmt::format("{}: the instance of patch {} belongs to run {}, which is "
+                      "not stored (call beginRun first)",
+                      location_, instance.patch_id, instance.run_id));
+    }
+    const core::Similarity2& t = instance.transform;
+    upsert.reset();
+    upsert.bind(1, instance.run_id)
+        .bind(2, std::int64_t{instance.patch_id})
+        .bind(3, std::int64_t{instance.version})
+        .bind(4, texture_id)
+        .bind(5, t.a)
+        .bind(6, t.b)
+        .bind(7, t.tx)
+        .bind(8, t.ty);
+    if (instance.psnr_db) upsert.bind(9, *instance.psnr_db);
+    upsert.bind(10, std::int64_t{instance.reused ? 1 : 0}).run();
+  }
+  return ids;
+}
+
+}  // namespace internal
+
+std::unique_ptr<TextureStore> openSqliteStore(const std::filesystem::path& path,
+                                              const OpenOptions& options) {
+  return std::make_unique<internal::SqliteStore>(path, options);
+}
+
+std::unique_ptr<TextureStore> openTextureStore(const std::string& location,
+                                               const OpenOptions& options) {
+  for (const char* scheme : {"postgresql://", "postgres://"}) {
+    if (location.rfind(scheme, 0) == 0) {
+      // Only the scheme is quoted: the rest of the URL may hold a password.
+      throw core::Error(
+          fmt::format("{}...: the PostgreSQL backend is not available yet; use a "
+                      "file path for SQLite",
+                      scheme));
+    }
+  }
+  return openSqliteStore(location, options);
+}
+
+}  // namespace tessera::db

@@ -1,0 +1,174 @@
+// The reads of the SQLite store (internal/sqlite_store.h). Each read is one SQL statement on a
+// pooled read-only connection, so it sees one committed snapshot: never half of a commit.
+#include <system_error>
+
+#include <fmt/format.h>
+
+#include "internal/sqlite_store.h"
+#include "internal/texture_codec.h"
+#include "tessera/core/error.h"
+
+namespace tessera::db::internal {
+
+namespace {
+
+TextureKind parseKind(const std::string& text) {
+  if (text == "single") return TextureKind::kSingle;
+  if (text == "pattern") return TextureKind::kPattern;
+  throw core::Error("unknown kind '" + text + "'");
+}
+
+constexpr const char* kSelectTexture =
+    "SELECT kind, width, height, texel_m, png, ccv, feature_kind, keypoints, descriptors, "
+    "lattice_v1x, lattice_v1y, lattice_v2x, lattice_v2y, content_key, run_id, source_patch, "
+    "name FROM textures WHERE id = ?";
+
+// The row of kSelectTexture as a record; throws core::Error with the reason when a column does
+// not decode.
+TextureRecord recordOf(const Statement& row, std::int64_t id) {
+  TextureRecord r;
+  r.id = id;
+  r.kind = parseKind(row.text(0));
+  r.texel_m = row.real(3);
+  decodePng(row.blobData(4), row.blobSize(4), r.rgb, r.mask);
+  if (r.rgb.cols != row.int64(1) || r.rgb.rows != row.int64(2)) {
+    throw core::Error("PNG size differs from the stored width and height");
+  }
+  r.ccv = decodeFloats(row.blobData(5), row.blobSize(5));
+  r.feature_kind = row.text(6);
+  r.keypoints = decodeKeypoints(row.blobData(7), row.blobSize(7));
+  r.descriptors = decodeDescriptors(row.blobData(8), row.blobSize(8));
+  if (!row.isNull(9)) {
+    r.lattice = Lattice{{row.real(9), row.real(10)}, {row.real(11), row.real(12)}};
+  }
+  r.content_key = row.text(13);
+  r.run_id = row.int64(14);  // NULL (imported) reads as 0
+  r.source_patch = static_cast<int>(row.int64(15));
+  r.name = row.text(16);
+  return r;
+}
+
+std::size_t fileBytes(const std::filesystem::path& path) {
+  std::error_code ec;
+  const std::uintmax_t bytes = std::filesystem::file_size(path, ec);
+  return ec ? 0 : static_cast<std::size_t>(bytes);
+}
+
+}  // namespace
+
+std::optional<std::int64_t> SqliteStore::findByContentKey(const std::string& key) const {
+  const ReadLease db(*this);
+  Statement query(*db, "SELECT id FROM textures WHERE content_key = ?");
+  query.bind(1, key);
+  if (!query.step()) return std::nullopt;
+  return query.int64(0);
+}
+
+std::optional<TextureRecord> SqliteStore::texture(std::int64_t id) const {
+  const ReadLease db(*this);
+  Statement query(*db, kSelectTexture);
+  query.bind(1, id);
+  if (!query.step()) return std::nullopt;
+  try {
+    return recordOf(query, id);
+  } catch (const core::Error& e) {
+    throw core::Error(fmt::format("{}: texture {} is damaged: {}", location_, id, e.what()));
+  }
+}
+
+std::vector<CcvEntry> SqliteStore::ccvVectors(std::int64_t after_id) const {
+  const ReadLease db(*this);
+  Statement query(*db, "SELECT id, ccv FROM textures WHERE id > ? ORDER BY id");
+  query.bind(1, after_id);
+  std::vector<CcvEntry> entries;
+  while (query.step()) {
+    CcvEntry& entry = entries.emplace_back();
+    entry.id = query.int64(0);
+    try {
+      entry.ccv = decodeFloats(query.blobData(1), query.blobSize(1));
+    } catch (const core::Error& e) {
+      throw core::Error(
+          fmt::format("{}: texture {} is damaged: {}", location_, entry.id, e.what()));
+    }
+  }
+  return entries;
+}
+
+std::vector<TextureSummary> SqliteStore::textures() const {
+  const ReadLease db(*this);
+  // length(png) reads the blob's size from the record header, not the blob itself.
+  Statement query(*db,
+                  "SELECT t.id, t.kind, t.width, t.height, t.run_id, t.source_patch, t.name, "
+                  "length(t.png), (SELECT count(*) FROM instances i WHERE i.texture_id = t.id) "
+                  "FROM textures t ORDER BY t.id");
+  std::vector<TextureSummary> summaries;
+  while (query.step()) {
+    TextureSummary& s = summaries.emplace_back();
+    s.id = query.int64(0);
+    s.kind = query.text(1) == "pattern" ? TextureKind::kPattern : TextureKind::kSingle;
+    s.width = static_cast<int>(query.int64(2));
+    s.height = static_cast<int>(query.int64(3));
+    s.run_id = query.int64(4);
+    s.source_patch = static_cast<int>(query.int64(5));
+    s.name = query.text(6);
+    s.png_bytes = static_cast<std::size_t>(query.int64(7));
+    s.uses = static_cast<std::size_t>(query.int64(8));
+  }
+  return summaries;
+}
+
+std::vector<TextureInstance> SqliteStore::instances(std::optional<std::int64_t> run_id) const {
+  const ReadLease db(*this);
+  Statement query(*db,
+                  "SELECT run_id, patch_id, version, texture_id, a, b, tx, ty, psnr_db, reused "
+                  "FROM instances WHERE ?1 IS NULL OR run_id = ?1 ORDER BY run_id, patch_id");
+  if (run_id) query.bind(1, *run_id);
+  std::vector<TextureInstance> instances;
+  while (query.step()) {
+    TextureInstance& i = instances.emplace_back();
+    i.run_id = query.int64(0);
+    i.patch_id = static_cast<int>(query.int64(1));
+    i.version = static_cast<int>(query.int64(2));
+    i.texture_id = query.int64(3);
+    i.transform = {query.real(4), query.real(5), query.real(6), query.real(7)};
+    if (!query.isNull(8)) i.psnr_db = query.real(8);
+    i.reused = query.int64(9) != 0;
+  }
+  return instances;
+}
+
+std::vector<RunRecord> SqliteStore::runs() const {
+  const ReadLease db(*this);
+  Statement query(*db, "SELECT id, started_utc, source, finished FROM runs ORDER BY id");
+  std::vector<RunRecord> runs;
+  while (query.step()) {
+    runs.push_back({query.int64(0), query.text(1), query.text(2), query.int64(3) != 0});
+  }
+  return runs;
+}
+
+StoreStats SqliteStore::stats() const {
+  StoreStats stats;
+  {
+    const ReadLease db(*this);
+    // One statement, so that every count comes from the same snapshot.
+    Statement query(*db,
+                    "SELECT (SELECT value FROM meta WHERE key = 'schema_version'), "
+                    "(SELECT count(*) FROM textures), "
+                    "(SELECT count(*) FROM textures WHERE kind = 'pattern'), "
+                    "(SELECT count(*) FROM instances), (SELECT count(*) FROM runs), "
+                    "(SELECT coalesce(sum(width * height), 0) FROM textures)");
+    query.step();
+    stats.schema_version = static_cast<int>(query.int64(0));
+    stats.textures = static_cast<std::size_t>(query.int64(1));
+    stats.patterns = static_cast<std::size_t>(query.int64(2));
+    stats.instances = static_cast<std::size_t>(query.int64(3));
+    stats.runs = static_cast<std::size_t>(query.int64(4));
+    stats.texture_pixels = static_cast<std::size_t>(query.int64(5));
+  }
+  // The -wal holds commits not yet checkpointed into the main file: part of the database.
+  stats.file_bytes = fileBytes(path_) + fileBytes(path_.string() + "-wal");
+  return stats;
+}
+
+}  // namespace tessera::db::internal

@@ -1,0 +1,120 @@
+#include "tessera/match/ccv_index.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include <fmt/format.h>
+#include <opencv2/core.hpp>
+#include <opencv2/flann.hpp>
+
+#include "tessera/core/error.h"
+
+namespace tessera::match {
+namespace {
+
+// Below this many vectors a linear scan is as fast as the index and exact.
+constexpr std::size_t kMinIndexed = 256;
+// FLANN leaves visited per query: enough for near-duplicates (a texture seen again) to be found.
+constexpr int kChecks = 64;
+constexpr int kTrees = 4;
+
+// FLANN's randomised trees draw from this thread's cv::theRNG(). Seeding it for the build makes
+// the index (and so the approximate answers) reproducible; the caller's generator state is
+// restored afterwards.
+class SeededRng {
+ public:
+  SeededRng() : saved_(cv::theRNG()) { cv::theRNG() = cv::RNG(0x7e55e4a); }
+  ~SeededRng() { cv::theRNG() = saved_; }
+  SeededRng(const SeededRng&) = delete;
+  SeededRng& operator=(const SeededRng&) = delete;
+
+ private:
+  cv::RNG saved_;
+};
+
+}  // namespace
+
+struct CcvIndex::Impl {
+  std::vector<float> values;      // every vector, row-major: the indexed ones, then the tail
+  std::vector<std::int64_t> ids;  // one per row
+  std::size_t indexed = 0;        // rows [0, indexed) are in `index`; the rest is the tail
+  std::unique_ptr<cv::flann::Index> index;
+
+  void rebuild(std::size_t dims) {
+    const cv::Mat rows(static_cast<int>(ids.size()), static_cast<int>(dims), CV_32F, values.data());
+    SeededRng seeded;
+    // cv::flann::Index keeps its own copy of the rows, so `values` may grow afterwards.
+    index = std::make_unique<cv::flann::Index>(rows, cv::flann::KDTreeIndexParams(kTrees),
+                                               cvflann::FLANN_DIST_L1);
+    indexed = ids.size();
+  }
+};
+
+CcvIndex::CcvIndex(std::size_t dims) : dims_(dims), impl_(std::make_unique<Impl>()) {
+  if (dims == 0) throw core::Error("CcvIndex: vectors must have at least one dimension");
+}
+
+CcvIndex::~CcvIndex() = default;
+CcvIndex::CcvIndex(CcvIndex&&) noexcept = default;
+CcvIndex& CcvIndex::operator=(CcvIndex&&) noexcept = default;
+
+void CcvIndex::add(std::int64_t id, const std::vector<float>& values) {
+  if (values.size() != dims_) {
+    throw core::Error(fmt::format("CcvIndex::add: vector of length {}, the index holds length {}",
+                                  values.size(), dims_));
+  }
+  impl_->values.insert(impl_->values.end(), values.begin(), values.end());
+  impl_->ids.push_back(id);
+  const std::size_t tail = impl_->ids.size() - impl_->indexed;
+  // Rebuilding once the tail passes an eighth of the index keeps adding amortised O(log n).
+  const std::size_t max_tail = std::max(kMinIndexed, impl_->indexed / 8);
+  if ((impl_->index == nullptr && impl_->ids.size() >= kMinIndexed) || tail > max_tail) {
+    impl_->rebuild(dims_);
+  }
+}
+
+std::size_t CcvIndex::size() const { return impl_->ids.size(); }
+
+std::vector<CcvNeighbour> CcvIndex::query(const std::vector<float>& values, double max_distance,
+                                          std::size_t k) const {
+  if (values.size() != dims_) {
+    throw core::Error(fmt::format("CcvIndex::query: vector of length {}, the index holds length {}",
+                                  values.size(), dims_));
+  }
+  std::vector<CcvNeighbour> found;
+  if (k == 0) return found;
+  const Impl& impl = *impl_;
+  // Distances are recomputed in double from the stored rows, so the index and the tail rank
+  // by exactly the same number and ties break by id.
+  const auto consider = [&](std::size_t row) {
+    const float* v = impl.values.data() + row * dims_;
+    double distance = 0.0;
+    for (std::size_t i = 0; i < dims_; ++i)
+      distance += std::abs(static_cast<double>(v[i]) - values[i]);
+    if (distance <= max_distance) found.push_back({impl.ids[row], distance});
+  };
+
+  std::size_t first_linear = 0;
+  if (impl.index != nullptr) {
+    first_linear = impl.indexed;
+    const int knn = static_cast<int>(std::min(k, impl.indexed));
+    const cv::Mat query_row = cv::Mat(values).reshape(1, 1);
+    cv::Mat indices, distances;
+    impl.index->knnSearch(query_row, indices, distances, knn, cv::flann::SearchParams(kChecks));
+    for (int j = 0; j < indices.cols; ++j) {
+      const int row = indices.at<int>(0, j);
+      if (row >= 0 && static_cast<std::size_t>(row) < impl.indexed) {
+        consider(static_cast<std::size_t>(row));
+      }
+    }
+  }
+  for (std::size_t row = first_linear; row < impl.ids.size(); ++row) consider(row);
+
+  std::sort(found.begin(), found.end(), [](const CcvNeighbour& a, const CcvNeighbour& b) {
+    return a.distance != b.distance ? a.distance < b.distance : a.id < b.id;
+  });
+  if (found.size() > k) found.resize(k);
+  return found;
+}
+
+}  // namespace tessera::match

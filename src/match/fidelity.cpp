@@ -1,0 +1,139 @@
+#include "tessera/match/fidelity.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+
+#include <fmt/format.h>
+#include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "tessera/core/error.h"
+
+namespace tessera::match {
+namespace {
+
+constexpr double kIdenticalPsnrDb = 99.0;
+
+// x wrapped into [0, period).
+double wrap(double x, double period) {
+  const double r = std::fmod(x, period);
+  return r < 0.0 ? r + period : r;
+}
+
+// A pixel-centre sample point x lies on texel round(x); that texel exists for x in
+// [-0.5, size - 0.5). In a tiled texture every point lies on one (after wrapping).
+int nearestTexel(double x, int size, bool tiled) {
+  const auto texel = static_cast<int>(std::floor(x + 0.5));
+  if (!tiled) return texel;
+  return texel >= size ? texel - size : texel;  // x was wrapped into [0, size)
+}
+
+}  // namespace
+
+Rendered renderThrough(const cv::Mat& texture, const cv::Mat& texture_mask,
+                       const core::Similarity2& patch_to_texture, int width, int height,
+                       bool tiled) {
+  if (texture.empty() || texture.type() != CV_8UC3) {
+    throw core::Error("renderThrough: the texture must be a non-empty CV_8UC3");
+  }
+  if (!texture_mask.empty() &&
+      (texture_mask.type() != CV_8UC1 || texture_mask.size() != texture.size())) {
+    throw core::Error("renderThrough: the texture mask must be CV_8UC1 of the texture's size");
+  }
+  if (width < 0 || height < 0) {
+    throw core::Error(fmt::format("renderThrough: negative grid size {}x{}", width, height));
+  }
+  Rendered out{cv::Mat(height, width, CV_8UC3, cv::Scalar::all(0)),
+               cv::Mat(height, width, CV_8UC1, cv::Scalar(0))};
+  if (width == 0 || height == 0) return out;
+
+  // Sample points of every texel centre, and which of them land on a valid texture texel
+  // (the nearest one: a texel counts as covered when the texture has a colour there).
+  const double tex_w = texture.cols, tex_h = texture.rows;
+  cv::Mat map_x(height, width, CV_32FC1), map_y(height, width, CV_32FC1);
+  for (int row = 0; row < height; ++row) {
+    auto* mx = map_x.ptr<float>(row);
+    auto* my = map_y.ptr<float>(row);
+    auto* covered = out.covered.ptr<std::uint8_t>(row);
+    for (int col = 0; col < width; ++col) {
+      const Eigen::Vector2d p =
+          patch_to_texture.apply({static_cast<double>(col), static_cast<double>(row)});
+      // Wrapping before the float conversion keeps sub-texel precision for far-off tiles.
+      const double x = tiled ? wrap(p.x(), tex_w) : p.x();
+      const double y = tiled ? wrap(p.y(), tex_h) : p.y();
+      mx[col] = static_cast<float>(x);
+      my[col] = static_cast<float>(y);
+      const int tx = nearestTexel(x, texture.cols, tiled);
+      const int ty = nearestTexel(y, texture.rows, tiled);
+      const bool inside = tx >= 0 && ty >= 0 && tx < texture.cols && ty < texture.rows;
+      if (inside && (texture_mask.empty() || texture_mask.at<std::uint8_t>(ty, tx) != 0)) {
+        covered[col] = 255;
+      }
+    }
+  }
+
+  const int border = tiled ? cv::BORDER_WRAP : cv::BORDER_REPLICATE;
+  if (texture_mask.empty()) {
+    cv::remap(texture, out.rgb, map_x, map_y, cv::INTER_LINEAR, border);
+  } else {
+    // Bilinear over the valid neighbours only (weights renormalised), so the colour of
+    // masked-out texels never bleeds into a covered texel at the mask's edge.
+    cv::Mat colour, weight, weight3, sampled_colour, sampled_weight;
+    texture.convertTo(colour, CV_32FC3);
+    cv::threshold(texture_mask, weight, 0, 1, cv::THRESH_BINARY);
+    weight.convertTo(weight, CV_32F);
+    cv::merge(std::vector<cv::Mat>{weight, weight, weight}, weight3);
+    const int masked_border = tiled ? cv::BORDER_WRAP : cv::BORDER_CONSTANT;
+    cv::remap(colour.mul(weight3), sampled_colour, map_x, map_y, cv::INTER_LINEAR, masked_border);
+    cv::remap(weight3, sampled_weight, map_x, map_y, cv::INTER_LINEAR, masked_border);
+    cv::Mat blended;
+    cv::divide(sampled_colour, cv::max(sampled_weight, 1e-6), blended);
+    blended.convertTo(out.rgb, CV_8UC3);
+  }
+  out.rgb.setTo(cv::Scalar::all(0), out.covered == 0);
+  return out;
+}
+
+Fidelity measureFidelity(const cv::Mat& patch_rgb, const cv::Mat& patch_mask,
+                         const cv::Mat& texture, const cv::Mat& texture_mask,
+                         const core::Similarity2& patch_to_texture, bool tiled) {
+  if (patch_rgb.empty() || patch_rgb.type() != CV_8UC3) {
+    throw core::Error("measureFidelity: the patch bitmap must be a non-empty CV_8UC3");
+  }
+  if (!patch_mask.empty() &&
+      (patch_mask.type() != CV_8UC1 || patch_mask.size() != patch_rgb.size())) {
+    throw core::Error("measureFidelity: the patch mask must be CV_8UC1 of the bitmap's size");
+  }
+  const Rendered rendered =
+      renderThrough(texture, texture_mask, patch_to_texture, patch_rgb.cols, patch_rgb.rows, tiled);
+  std::size_t in_mask = 0, compared = 0;
+  double squared_error = 0.0;
+  for (int row = 0; row < patch_rgb.rows; ++row) {
+    const auto* patch = patch_rgb.ptr<cv::Vec3b>(row);
+    const auto* render = rendered.rgb.ptr<cv::Vec3b>(row);
+    const auto* covered = rendered.covered.ptr<std::uint8_t>(row);
+    const std::uint8_t* inside = patch_mask.empty() ? nullptr : patch_mask.ptr<std::uint8_t>(row);
+    for (int col = 0; col < patch_rgb.cols; ++col) {
+      if (inside != nullptr && inside[col] == 0) continue;
+      ++in_mask;
+      if (covered[col] == 0) continue;
+      ++compared;
+      for (int c = 0; c < 3; ++c) {
+        const double d = static_cast<double>(patch[col][c]) - render[col][c];
+        squared_error += d * d;
+      }
+    }
+  }
+  Fidelity fidelity;
+  fidelity.texels = compared;
+  if (compared == 0) return fidelity;
+  fidelity.coverage = static_cast<double>(compared) / static_cast<double>(in_mask);
+  const double mse = squared_error / (3.0 * static_cast<double>(compared));
+  // Capped so that "identical" reads the same whatever the patch size.
+  fidelity.psnr_db = mse > 0.0 ? std::min(kIdenticalPsnrDb, 10.0 * std::log10(255.0 * 255.0 / mse))
+                               : kIdenticalPsnrDb;
+  return fidelity;
+}
+
+}  // namespace tessera::match

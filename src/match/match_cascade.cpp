@@ -1,0 +1,203 @@
+#include "tessera/match/match_cascade.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+
+#include <fmt/format.h>
+#include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "tessera/match/cross_correlation.h"
+#include "tessera/match/fidelity.h"
+
+namespace tessera::match {
+
+namespace {
+
+// Tile pixel -> the same pixel after cv::rotate by `turns` quarter turns clockwise, inverted:
+// the similarity from the rotated tile's pixels back to the original's (W x H original).
+core::Similarity2 unrotate(int turns, int width, int height) {
+  const double w1 = width - 1.0, h1 = height - 1.0;
+  switch (turns % 4) {
+    case 1:  // clockwise: rotated (X, Y) = (h1 - r, c), so (c, r) = (Y, h1 - X)
+      return {0.0, -1.0, 0.0, h1};
+    case 2:  // (X, Y) = (w1 - c, h1 - r)
+      return {-1.0, 0.0, w1, h1};
+    case 3:  // counter-clockwise: (X, Y) = (r, w1 - c), so (c, r) = (w1 - Y, X)
+      return {0.0, 1.0, w1, 0.0};
+    default:
+      return {};
+  }
+}
+
+cv::Mat rotated(const cv::Mat& image, int turns) {
+  if (turns % 4 == 0) return image;
+  cv::Mat out;
+  const int codes[] = {0, cv::ROTATE_90_CLOCKWISE, cv::ROTATE_180, cv::ROTATE_90_COUNTERCLOCKWISE};
+  cv::rotate(image, out, codes[turns % 4]);
+  return out;
+}
+
+// Zero-mean normalised correlation of two RGB images over `mask` (grey levels): whether the
+// render follows the patch's structure, not only its mean colour.
+double structureAgreement(const cv::Mat& a, const cv::Mat& b, const cv::Mat& mask) {
+  cv::Mat ga = greyForCorrelation(a, mask), gb = greyForCorrelation(b, mask);
+  cv::Scalar ma, sa, mb, sb;
+  cv::meanStdDev(ga, ma, sa, mask);
+  cv::meanStdDev(gb, mb, sb, mask);
+  if (sa[0] < 1e-6 || sb[0] < 1e-6) return 0.0;
+  cv::Mat da = ga - ma[0], db = gb - mb[0];
+  cv::Mat product = da.mul(db);
+  return cv::mean(product, mask)[0] / (sa[0] * sb[0]);
+}
+
+}  // namespace
+
+TextureDescription describeTexture(const cv::Mat& rgb, const cv::Mat& mask,
+                                   const MatchConfig& config) {
+  TextureDescription description;
+  description.rgb = rgb;
+  description.mask = mask.empty() ? cv::Mat(rgb.size(), CV_8UC1, cv::Scalar(255)) : mask;
+  const int longest = std::max(rgb.cols, rgb.rows);
+  if (config.describe_max_px <= 0 || longest <= config.describe_max_px) {
+    description.ccv = computeCcv(rgb, description.mask, config.ccv);
+    description.features = detectFeatures(rgb, description.mask, config.features);
+    return description;
+  }
+  const double f = static_cast<double>(config.describe_max_px) / longest;
+  cv::Mat small_rgb, small_mask;
+  cv::resize(rgb, small_rgb, cv::Size(), f, f, cv::INTER_AREA);
+  cv::resize(description.mask, small_mask, small_rgb.size(), 0, 0, cv::INTER_NEAREST);
+  description.ccv = computeCcv(small_rgb, small_mask, config.ccv);
+  description.features = detectFeatures(small_rgb, small_mask, config.features);
+  // Back to full-size pixel centres: x_full + 0.5 = (x_small + 0.5) / f.
+  for (cv::KeyPoint& k : description.features.keypoints) {
+    k.pt = cv::Point2f(static_cast<float>((k.pt.x + 0.5) / f - 0.5),
+                       static_cast<float>((k.pt.y + 0.5) / f - 0.5));
+    k.size = static_cast<float>(k.size / f);
+  }
+  return description;
+}
+
+MemoryCatalog::MemoryCatalog(const CcvConfig& ccv) : index_(ccvLength(ccv)) {}
+
+void MemoryCatalog::add(std::shared_ptr<const StoredTexture> texture) {
+  index_.add(texture->id, texture->description.ccv.values);
+  const auto at = std::lower_bound(
+      textures_.begin(), textures_.end(), texture->id,
+      [](const std::shared_ptr<const StoredTexture>& t, std::int64_t id) { return t->id < id; });
+  textures_.insert(at, std::move(texture));
+}
+
+std::vector<CcvNeighbour> MemoryCatalog::nearest(const std::vector<float>& ccv, double max_distance,
+                                                 std::size_t k) const {
+  return index_.query(ccv, max_distance, k);
+}
+
+std::shared_ptr<const StoredTexture> MemoryCatalog::load(std::int64_t id) const {
+  const auto at = std::lower_bound(
+      textures_.begin(), textures_.end(), id,
+      [](const std::shared_ptr<const StoredTexture>& t, std::int64_t key) { return t->id < key; });
+  return at != textures_.end() && (*at)->id == id ? *at : nullptr;
+}
+
+std::optional<core::Similarity2> MatchCascade::findPattern(const TextureDescription& query,
+                                                           const StoredTexture& stored,
+                                                           CandidateVerdict& verdict) const {
+  // The stored image is looked for inside the new one (a pattern tile, or a single texture
+  // smaller than the patch), else the new one inside the stored one.
+  const cv::Mat query_grey = greyForCorrelation(query.rgb, query.mask);
+  const cv::Mat stored_grey = greyForCorrelation(stored.description.rgb, stored.description.mask);
+  CorrelationPeak best;
+  int best_turns = 0;
+  bool stored_inside = true;
+  for (int turns = 0; turns < 4; ++turns) {
+    const cv::Mat tile = rotated(stored_grey, turns);
+    if (tile.cols <= query_grey.cols && tile.rows <= query_grey.rows) {
+      const CorrelationPeak peak = findTile(query_grey, tile);
+      if (peak.score > best.score) best = peak, best_turns = turns, stored_inside = true;
+    } else if (!stored.pattern && query_grey.cols <= tile.cols && query_grey.rows <= tile.rows) {
+      const CorrelationPeak peak = findTile(tile, query_grey);
+      if (peak.score > best.score) best = peak, best_turns = turns, stored_inside = false;
+    }
+  }
+  verdict.method = "ncc";
+  if (best.score < config_.ncc_min_score) {
+    verdict.reason = fmt::format("NCC peak {:.2f} < {:.2f}", best.score, config_.ncc_min_score);
+    return std::nullopt;
+  }
+  // New texel p -> rotated stored image: p - offset (stored inside) or p + offset.
+  const double sign = stored_inside ? -1.0 : 1.0;
+  const core::Similarity2 shift{1.0, 0.0, sign * best.x, sign * best.y};
+  return shift.then(unrotate(best_turns, stored_grey.cols, stored_grey.rows));
+}
+
+CandidateVerdict MatchCascade::tryCandidate(const TextureDescription& query,
+                                            const StoredTexture& stored,
+                                            double ccv_distance) const {
+  CandidateVerdict verdict;
+  verdict.id = stored.id;
+  verdict.ccv_distance = ccv_distance;
+  std::optional<core::Similarity2> transform;
+  if (!stored.pattern) {
+    verdict.method = "features";
+    const auto found = matchFeatures(query.features, stored.description.features, config_.features);
+    if (found) {
+      transform = found->query_to_stored;
+    } else {
+      verdict.reason = "too few feature matches";
+    }
+  }
+  // Patterns, and single textures that give too few features (plain or fine-grained surfaces
+  // at the same scale), by cross-correlation.
+  if (!transform) transform = findPattern(query, stored, verdict);
+  if (!transform) return verdict;
+  verdict.transform = transform;
+
+  const Rendered render = renderThrough(stored.description.rgb, stored.description.mask, *transform,
+                                        query.rgb.cols, query.rgb.rows, stored.pattern);
+  const Fidelity fidelity = measureFidelity(query.rgb, query.mask, stored.description.rgb,
+                                            stored.description.mask, *transform, stored.pattern);
+  verdict.psnr_db = fidelity.psnr_db;
+  verdict.coverage = fidelity.coverage;
+  cv::Mat compared;
+  cv::bitwise_and(query.mask, render.covered, compared);
+  const double structure = structureAgreement(query.rgb, render.rgb, compared);
+  if (fidelity.coverage < config_.min_coverage) {
+    verdict.reason = fmt::format("covers {:.0f} % of the patch", 100.0 * fidelity.coverage);
+  } else if (fidelity.psnr_db < config_.min_psnr_db) {
+    verdict.reason = fmt::format("PSNR {:.1f} dB < {:.1f}", fidelity.psnr_db, config_.min_psnr_db);
+  } else if (structure < config_.ncc_min_score) {
+    verdict.reason = fmt::format("structure NCC {:.2f} < {:.2f}", structure, config_.ncc_min_score);
+  } else {
+    verdict.accepted = true;
+    verdict.reason.clear();
+  }
+  return verdict;
+}
+
+MatchDecision MatchCascade::match(const TextureDescription& query,
+                                  const TextureCatalog& catalog) const {
+  const auto start = std::chrono::steady_clock::now();
+  MatchDecision decision;
+  decision.considered = catalog.size();
+  const std::vector<CcvNeighbour> candidates =
+      catalog.nearest(query.ccv.values, config_.ccv_max_distance, config_.max_candidates);
+  decision.passed_ccv = candidates.size();
+  for (const CcvNeighbour& candidate : candidates) {
+    const std::shared_ptr<const StoredTexture> stored = catalog.load(candidate.id);
+    if (!stored) continue;
+    CandidateVerdict verdict = tryCandidate(query, *stored, candidate.distance);
+    decision.verdicts.push_back(verdict);
+    if (verdict.accepted) {
+      decision.match = std::move(verdict);
+      break;
+    }
+  }
+  decision.ms =
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+  return decision;
+}
+
+}  // namespace tessera::match
