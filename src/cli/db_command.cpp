@@ -192,25 +192,24 @@ int stats(const db::TextureStore& store, bool json) {
 CLI::App* addDbCommand(CLI::App& app, DbArguments& args) {
   CLI::App* db = app.add_subcommand("db", "Look into, export or fill a texture database");
   db->require_subcommand(1);
-  auto add_db = [&args](CLI::App* sub, bool must_exist) {
-    CLI::Option* option =
-        sub->add_option("DB", args.db, "Texture database (SQLite file)")->required();
-    if (must_exist) option->check(CLI::ExistingFile);
+  // The store itself names a missing file, or a location it cannot open, clearly.
+  auto add_db = [&args](CLI::App* sub) {
+    sub->add_option("DB", args.db, "Texture database (SQLite file)")->required();
   };
   CLI::App* list = db->add_subcommand("list", "One line per texture: kind, size, uses, origin");
-  add_db(list, true);
+  add_db(list);
   list->add_flag("--json", args.json, "Print a JSON array");
   CLI::App* show = db->add_subcommand("show", "Everything about one texture and its instances");
-  add_db(show, true);
+  add_db(show);
   show->add_option("ID", args.texture_id, "Texture id (as db list shows)")->required();
   show->add_flag("--json", args.json, "Print a JSON object");
   CLI::App* exp = db->add_subcommand(
       "export", "Write every texture as an RGBA PNG (alpha: valid texels) and textures.json");
-  add_db(exp, true);
+  add_db(exp);
   exp->add_option("DIR", args.out_dir, "Folder to write to (created if needed)")->required();
   CLI::App* imp = db->add_subcommand(
       "import", "Add standard textures (images) to a database, created if missing");
-  add_db(imp, false);
+  add_db(imp);
   imp->add_option("IMAGES", args.images, "Image files (PNG, JPEG, ...; alpha marks valid texels)")
       ->required()
       ->check(CLI::ExistingFile);
@@ -220,7 +219,7 @@ CLI::App* addDbCommand(CLI::App& app, DbArguments& args) {
   imp->add_option("--config", args.config, "YAML config whose match: keys describe the textures")
       ->check(CLI::ExistingFile);
   CLI::App* st = db->add_subcommand("stats", "Schema version, counts and sizes");
-  add_db(st, true);
+  add_db(st);
   st->add_flag("--json", args.json, "Print a JSON object");
   return db;
 }

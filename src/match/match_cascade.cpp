@@ -69,7 +69,9 @@ TextureDescription describeTexture(const cv::Mat& rgb, const cv::Mat& mask,
   cv::Mat small_rgb, small_mask;
   cv::resize(rgb, small_rgb, cv::Size(), f, f, cv::INTER_AREA);
   cv::resize(description.mask, small_mask, small_rgb.size(), 0, 0, cv::INTER_NEAREST);
-  description.ccv = computeCcv(small_rgb, small_mask, config.ccv);
+  CcvConfig ccv = config.ccv;  // coherence is judged in full-size texels
+  ccv.min_coherent_px = std::max(1, static_cast<int>(std::lround(ccv.min_coherent_px * f * f)));
+  description.ccv = computeCcv(small_rgb, small_mask, ccv);
   description.features = detectFeatures(small_rgb, small_mask, config.features);
   // Back to full-size pixel centres: x_full + 0.5 = (x_small + 0.5) / f.
   for (cv::KeyPoint& k : description.features.keypoints) {

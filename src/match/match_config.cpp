@@ -5,6 +5,7 @@
 namespace tessera::match {
 
 void readConfig(const core::ConfigSection& section, MatchConfig& config) {
+  section.read("enabled", config.enabled);
   section.read("ccv_blur_sigma_px", config.ccv.blur_sigma_px);
   section.read("ccv_levels", config.ccv.levels);
   section.read("ccv_coherent_fraction", config.ccv.coherent_fraction);

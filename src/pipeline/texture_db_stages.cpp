@@ -95,6 +95,11 @@ MatchedPatch MatchStage::process(const PatchJob& job) const {
   matched.finalized_at = job.finalized_at;
   matched.bitmap = textures_.build(job.patch);
   if (!matched.bitmap) return matched;
+  if (!cascade_.config().enabled) {  // stored as it is: no description, no candidates
+    matched.description =
+        match::TextureDescription{matched.bitmap->image, validTexels(*matched.bitmap), {}, {}};
+    return matched;
+  }
   try {
     const SteadyTime start = std::chrono::steady_clock::now();
     matched.description = match::describeTexture(matched.bitmap->image,

@@ -116,10 +116,17 @@ TEST(Ccv, DistanceIsZeroToItselfSmallAcrossSizesAndLargeToAnotherImage) {
   const cv::Mat unrelated = randomShapes(160, 120, 2);
   cv::Mat upscaled;
   cv::resize(image, upscaled, cv::Size(), 2.0, 2.0, cv::INTER_LINEAR);
-  const Ccv ccv = computeCcv(image, {});
-  EXPECT_DOUBLE_EQ(ccvDistance(ccv.values, computeCcv(image, {}).values), 0.0);
-  const double across_sizes = ccvDistance(ccv.values, computeCcv(upscaled, {}).values);
-  const double to_other = ccvDistance(ccv.values, computeCcv(unrelated, {}).values);
+  // Coherence as a share of the image (Pass et al.), so that a blob scaled with its image
+  // stays coherent; the blur scales with it too.
+  CcvConfig config;
+  config.coherent_fraction = 0.01;
+  CcvConfig upscaled_config = config;
+  upscaled_config.blur_sigma_px *= 2.0;
+  const Ccv ccv = computeCcv(image, {}, config);
+  EXPECT_DOUBLE_EQ(ccvDistance(ccv.values, computeCcv(image, {}, config).values), 0.0);
+  const double across_sizes =
+      ccvDistance(ccv.values, computeCcv(upscaled, {}, upscaled_config).values);
+  const double to_other = ccvDistance(ccv.values, computeCcv(unrelated, {}, config).values);
   EXPECT_LT(across_sizes, 0.15);
   EXPECT_GT(to_other, 1.0);
 }

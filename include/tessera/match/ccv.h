@@ -17,9 +17,12 @@ struct CcvConfig {
   double blur_sigma_px = 1.0;  // Gaussian blur before quantising (0: none)
   int levels = 4;              // per channel: levels^3 colour bins
   // A component is coherent when it holds at least s = max(min_coherent_px,
-  // coherent_fraction * N) pixels (Pass et al. use 1 % of the image).
-  double coherent_fraction = 0.01;
-  int min_coherent_px = 16;
+  // coherent_fraction * N) pixels. Pass et al. use 1 % of the image; tessera compares bitmaps of
+  // one texel size but of very different extents (a crop against a whole wall), where a share of
+  // the image would call the same blob coherent in one and not in the other: so by default s is
+  // a fixed 50 texels, as in the published code.
+  double coherent_fraction = 0.0;
+  int min_coherent_px = 50;
   // Divide each channel by its mean over the mask (times 128) before quantising, so that an
   // exposure change between two sightings does not move every pixel to another bin.
   bool normalise_exposure = true;

@@ -22,6 +22,9 @@
 namespace tessera::match {
 
 struct MatchConfig {
+  // false: every bitmap is stored as its own texture, undescribed and unmatched (to measure
+  // what matching costs, or to build a map without reuse).
+  bool enabled = true;
   CcvConfig ccv;
   FeatureConfig features;
   double ccv_max_distance = 0.6;   // the prefilter: candidates farther than this are removed

@@ -1,0 +1,105 @@
+// The texture database on the default recording: what is reused, that it does not depend on the
+// thread count, and that a second run of the same place reuses what the first stored.
+#include <map>
+#include <optional>
+#include <set>
+#include <string>
+#include <tuple>
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include "support/test_data.h"
+#include "tessera/db/texture_store.h"
+#include "tessera/drivers/oni/oni_source.h"
+#include "tessera/eval/run_evaluation.h"
+#include "tessera/pipeline/run.h"
+
+namespace tessera::pipeline {
+namespace {
+
+namespace fs = std::filesystem;
+
+const fs::path kRecording = test::sourceDir() / "recordings/office.oni";
+
+RunSummary runOffice(const fs::path& out, int threads, std::optional<std::string> db = {}) {
+  drivers::oni::OniSource source(kRecording);
+  RunOptions options;
+  options.out_dir = out;
+  options.threads = threads;
+  options.poses = PoseSource::kGroundTruth;
+  options.db = std::move(db);
+  return runPipeline(source, loadRunConfig(std::nullopt), options);
+}
+
+// (patch, version, texture, reused) of every instance, and the stored textures' content keys.
+using Instances = std::set<std::tuple<int, int, std::int64_t, bool>>;
+Instances instancesOf(const fs::path& db_path) {
+  Instances instances;
+  for (const db::TextureInstance& i : db::openSqliteStore(db_path, {false, true})->instances()) {
+    instances.insert({i.patch_id, i.version, i.texture_id, i.reused});
+  }
+  return instances;
+}
+
+#define TESSERA_REQUIRE_DEFAULT_RECORDING()                               \
+  if (!fs::is_regular_file(kRecording)) {                                 \
+    GTEST_SKIP() << "recordings/office.oni not rendered (configure with " \
+                    "TESSERA_RENDER_DEFAULT_RECORDING=ON)";               \
+  }
+
+// The office's two oak tables: the second table's top reuses the first's texture, turned by the
+// half turn between their grids, and the ground truth finds no false match. The database holds
+// the same textures and instances whether one thread or two ran.
+TEST(TextureReuse, TheSecondTableReusesTheFirstAndOneOrTwoThreadsStoreTheSame) {
+  TESSERA_REQUIRE_DEFAULT_RECORDING();
+  const fs::path root = test::freshTempDir();
+  const RunSummary one = runOffice(root / "one", 1);
+  const RunSummary two = runOffice(root / "two", 2);
+  EXPECT_EQ(one.textures_stored, two.textures_stored);
+  EXPECT_EQ(one.reuses, two.reuses);
+  EXPECT_EQ(instancesOf(root / "one/textures.db"), instancesOf(root / "two/textures.db"));
+  EXPECT_GE(two.reuses, 1u);
+  EXPECT_LT(two.pixels_after, two.pixels_before);
+
+  const nlohmann::json figures =
+      eval::evaluateRun(root / "two", test::sourceDir() / "recordings/office.gt.json");
+  EXPECT_EQ(figures["false_matches"], 0);
+  std::map<std::string, std::int64_t> texture_of_plane;
+  std::optional<bool> second_table_reused;
+  for (const auto& patch : figures["textures"]) {
+    const std::string plane = patch["plane"];
+    texture_of_plane[plane] = patch["texture_id"].get<std::int64_t>();
+    if (plane == "table_1.top" || plane == "table_2.top") {
+      if (patch["reused"].get<bool>()) second_table_reused = true;
+    }
+  }
+  ASSERT_TRUE(texture_of_plane.count("table_1.top") && texture_of_plane.count("table_2.top"));
+  EXPECT_EQ(texture_of_plane["table_1.top"], texture_of_plane["table_2.top"]);
+  EXPECT_TRUE(second_table_reused.value_or(false));
+  for (const double psnr : two.reuse_psnrs_db) {
+    EXPECT_GE(psnr, loadRunConfig(std::nullopt).match.min_psnr_db);
+  }
+}
+
+// Repeated runs in one place: the second run with the same database reuses at least 90 % of its
+// patches' textures and grows the database by at most 10 %.
+TEST(TextureReuse, ASecondRunWithTheSameDatabaseReusesWhatTheFirstStored) {
+  TESSERA_REQUIRE_DEFAULT_RECORDING();
+  const fs::path root = test::freshTempDir();
+  const std::string db_path = (root / "office.db").string();
+  runOffice(root / "first", 2, db_path);
+  const std::size_t textures_after_first =
+      db::openSqliteStore(db_path, {false, true})->stats().textures;
+  const RunSummary second = runOffice(root / "second", 2, db_path);
+  const std::size_t textures_after_second =
+      db::openSqliteStore(db_path, {false, true})->stats().textures;
+  ASSERT_GT(second.textured_patches, 0u);
+  EXPECT_GE(static_cast<double>(second.reuses), 0.9 * static_cast<double>(second.textured_patches));
+  EXPECT_LE(static_cast<double>(textures_after_second),
+            1.1 * static_cast<double>(textures_after_first));
+  EXPECT_EQ(db::openSqliteStore(db_path, {false, true})->runs().size(), 2u);
+}
+
+}  // namespace
+}  // namespace tessera::pipeline
