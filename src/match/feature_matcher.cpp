@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <numeric>
+#include <optional>
 
 #include <fmt/format.h>
 #include <opencv2/calib3d.hpp>
@@ -18,6 +19,7 @@ namespace {
 // lies outside the patch, which differs between two sightings of the same texture.
 constexpr int kMaskMarginPx = 8;
 constexpr int kRansacIterations = 5000;
+constexpr int kRepeatedRansacIterations = 4000;
 constexpr double kRansacConfidence = 0.999;
 constexpr int kKdTrees = 4;
 constexpr int kChecks = 64;
@@ -95,6 +97,37 @@ cv::Mat equalisedGrey(const cv::Mat& rgb, const cv::Mat& mask) {
   return equalised;
 }
 
+// The RANSAC similarity over the nearest-neighbour matches that pass the ratio test (1: all).
+std::optional<FeatureMatch> similarityFrom(const Features& query, const Features& stored,
+                                           const std::vector<std::vector<cv::DMatch>>& nearest,
+                                           double ratio, const FeatureConfig& config,
+                                           int iterations) {
+  std::vector<cv::Point2f> from, to;
+  for (const auto& pair : nearest) {
+    if (pair.empty()) continue;
+    if (ratio < 1.0 && (pair.size() < 2 || pair[0].distance >= ratio * pair[1].distance)) continue;
+    from.push_back(query.keypoints[static_cast<std::size_t>(pair[0].queryIdx)].pt);
+    to.push_back(stored.keypoints[static_cast<std::size_t>(pair[0].trainIdx)].pt);
+  }
+  const int min_inliers = std::max(config.min_inliers, 2);  // a similarity needs two points
+  const int good = static_cast<int>(from.size());
+  if (good < min_inliers) return std::nullopt;
+  std::vector<std::uint8_t> inlier_flags;
+  // OpenCV's RANSAC here draws from a fixed-seed generator: the answer is reproducible.
+  const cv::Mat m =
+      cv::estimateAffinePartial2D(from, to, inlier_flags, cv::RANSAC, config.ransac_threshold_px,
+                                  static_cast<std::size_t>(iterations), kRansacConfidence);
+  if (m.empty()) return std::nullopt;
+  const int inliers = cv::countNonZero(inlier_flags);
+  const core::Similarity2 query_to_stored{m.at<double>(0, 0), m.at<double>(1, 0),
+                                          m.at<double>(0, 2), m.at<double>(1, 2)};
+  const double scale = query_to_stored.scale();
+  if (inliers < min_inliers || scale < config.min_scale || scale > config.max_scale) {
+    return std::nullopt;
+  }
+  return FeatureMatch{query_to_stored, good, inliers};
+}
+
 cv::Ptr<cv::DescriptorMatcher> makeMatcher(int descriptor_type) {
   const auto search = cv::makePtr<cv::flann::SearchParams>(kChecks);
   if (descriptor_type == CV_32F) {
@@ -141,30 +174,15 @@ std::optional<FeatureMatch> matchFeatures(const Features& query, const Features&
     makeMatcher(query.descriptors.type())
         ->knnMatch(query.descriptors, stored.descriptors, nearest, 2);
   }
-  std::vector<cv::Point2f> from, to;
-  for (const auto& pair : nearest) {
-    // Lowe's ratio test: keep a match only when clearly nearer than the runner-up.
-    if (pair.size() < 2 || pair[0].distance >= config.ratio * pair[1].distance) continue;
-    from.push_back(query.keypoints[static_cast<std::size_t>(pair[0].queryIdx)].pt);
-    to.push_back(stored.keypoints[static_cast<std::size_t>(pair[0].trainIdx)].pt);
-  }
-  const int good = static_cast<int>(from.size());
-  if (good < min_inliers) return std::nullopt;
-
-  std::vector<std::uint8_t> inlier_flags;
-  // OpenCV's RANSAC here draws from a fixed-seed generator: the answer is reproducible.
-  const cv::Mat m =
-      cv::estimateAffinePartial2D(from, to, inlier_flags, cv::RANSAC, config.ransac_threshold_px,
-                                  kRansacIterations, kRansacConfidence);
-  if (m.empty()) return std::nullopt;
-  const int inliers = cv::countNonZero(inlier_flags);
-  const core::Similarity2 query_to_stored{m.at<double>(0, 0), m.at<double>(1, 0),
-                                          m.at<double>(0, 2), m.at<double>(1, 2)};
-  const double scale = query_to_stored.scale();
-  if (inliers < min_inliers || scale < config.min_scale || scale > config.max_scale) {
-    return std::nullopt;
-  }
-  return FeatureMatch{query_to_stored, good, inliers};
+  // Lowe's ratio test: keep a match only when clearly nearer than the runner-up.
+  std::optional<FeatureMatch> found =
+      similarityFrom(query, stored, nearest, config.ratio, config, kRansacIterations);
+  if (found) return found;
+  // A repeating texture (bricks, tiles) has no clear runner-up: every feature has twins one
+  // period away. Then every nearest neighbour is kept, and RANSAC (given more draws, as fewer
+  // matches agree) looks for the shift most of them share; any lattice shift reproduces the
+  // texture, and the cascade's fidelity check judges the result.
+  return similarityFrom(query, stored, nearest, 1.0, config, kRepeatedRansacIterations);
 }
 
 }  // namespace tessera::match

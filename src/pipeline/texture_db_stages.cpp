@@ -79,6 +79,12 @@ std::shared_ptr<const match::StoredTexture> StoreCatalog::load(std::int64_t id) 
 
 void StoreCatalog::add(std::shared_ptr<const match::StoredTexture> texture) {
   std::unique_lock lock(mutex_);
+  // Undescribed (match.enabled false): kept for export, never a candidate.
+  if (texture->description.ccv.values.empty()) {
+    std::lock_guard cache_lock(cache_mutex_);
+    cache_[texture->id] = std::move(texture);
+    return;
+  }
   index_.add(texture->id, texture->description.ccv.values);
   ++size_;
   newest_id_ = std::max(newest_id_, texture->id);
@@ -166,7 +172,8 @@ CommitRecord CommitStage::process(MatchedPatch matched) {
   instance.patch_id = bitmap.id;
   instance.version = bitmap.version;
   db::Commit commit;
-  const std::optional<match::CandidateVerdict> reuse = recheck(matched);
+  const std::optional<match::CandidateVerdict> reuse =
+      cascade_.config().enabled ? recheck(matched) : std::nullopt;
   std::shared_ptr<match::StoredTexture> fresh;
   if (reuse) {
     instance.texture_id = reuse->id;
@@ -202,20 +209,21 @@ CommitRecord CommitStage::process(MatchedPatch matched) {
     }
   }
   commit.instances.push_back(instance);
+  std::vector<std::int64_t> ids;
   try {
-    const std::vector<std::int64_t> ids = store_.commit(commit);
-    if (fresh) {
-      instance.texture_id = ids.at(0);
-      fresh->id = ids.at(0);
-      committed_.push_back(fresh);
-      catalog_.add(fresh);
-      ++textures_stored_;
-    }
+    ids = store_.commit(commit);
   } catch (const core::Error& e) {
     // The map keeps the patch's own bitmap; the database keeps every earlier commit.
     spdlog::error("patch {} version {}: not committed: {}", bitmap.id, bitmap.version, e.what());
     ++commit_failures_;
     return record;
+  }
+  if (fresh) {
+    instance.texture_id = ids.at(0);
+    fresh->id = ids.at(0);
+    committed_.push_back(fresh);
+    catalog_.add(fresh);
+    ++textures_stored_;
   }
   if (!texture_pixels_.count(instance.texture_id)) {
     const auto stored = catalog_.load(instance.texture_id);

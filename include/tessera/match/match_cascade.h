@@ -28,9 +28,9 @@ struct MatchConfig {
   CcvConfig ccv;
   FeatureConfig features;
   double ccv_max_distance = 0.6;   // the prefilter: candidates farther than this are removed
-  std::size_t max_candidates = 8;  // at most this many, nearest first, go on to NCC/features
+  std::size_t max_candidates = 4;  // at most this many, nearest first, go on to NCC/features
   double ncc_min_score = 0.5;      // a pattern tile must correlate at least this well
-  double min_psnr_db = 24.0;       // fidelity of an accepted reuse
+  double min_psnr_db = 28.0;       // fidelity of an accepted reuse
   double min_coverage = 0.85;      // share of the patch mask a single texture must cover
   // Bitmaps longer than this (pixels) are described (CCV, features) at this size: a wall's
   // 1000-texel bitmap costs 4 times less, and keypoints are scaled back to full size.
