@@ -14,6 +14,7 @@
 #include "tessera/match/match_cascade.h"
 #include "tessera/pipeline/run_config.h"
 #include "tessera/texture/bitmap_export.h"
+#include "texture_image.h"
 
 namespace tessera::cli {
 
@@ -130,18 +131,8 @@ int import(db::TextureStore& store, const DbArguments& args) {
   const pipeline::RunConfig config = pipeline::loadRunConfig(
       args.config.empty() ? std::nullopt : std::optional<std::filesystem::path>(args.config));
   for (const std::string& path : args.images) {
-    const cv::Mat image = cv::imread(path, cv::IMREAD_UNCHANGED);
-    if (image.empty()) throw core::Error(fmt::format("{}: not an image OpenCV can read", path));
     cv::Mat rgb, mask;
-    if (image.channels() == 4) {
-      cv::cvtColor(image, rgb, cv::COLOR_BGRA2RGB);
-      cv::extractChannel(image, mask, 3);
-      cv::threshold(mask, mask, 0, 255, cv::THRESH_BINARY);
-    } else {
-      cv::cvtColor(image, rgb, image.channels() == 1 ? cv::COLOR_GRAY2RGB : cv::COLOR_BGR2RGB);
-      mask = cv::Mat(rgb.size(), CV_8UC1, cv::Scalar(255));
-    }
-    if (rgb.depth() != CV_8U) throw core::Error(fmt::format("{}: not an 8-bit image", path));
+    readTextureImage(path, rgb, mask);
     const match::TextureDescription description = match::describeTexture(rgb, mask, config.match);
     db::TextureRecord record;
     record.kind = args.pattern ? db::TextureKind::kPattern : db::TextureKind::kSingle;

@@ -12,26 +12,11 @@
 #include "tessera/match/fidelity.h"
 #include "tessera/match/match_cascade.h"
 #include "tessera/pipeline/run_config.h"
+#include "texture_image.h"
 
 namespace tessera::cli {
 
 namespace {
-
-// RGB and mask (the alpha channel, when there is one) of an image file.
-void readImage(const std::string& path, cv::Mat& rgb, cv::Mat& mask) {
-  const cv::Mat image = cv::imread(path, cv::IMREAD_UNCHANGED);
-  if (image.empty() || image.depth() != CV_8U) {
-    throw core::Error(fmt::format("{}: not an 8-bit image OpenCV can read", path));
-  }
-  if (image.channels() == 4) {
-    cv::cvtColor(image, rgb, cv::COLOR_BGRA2RGB);
-    cv::extractChannel(image, mask, 3);
-    cv::threshold(mask, mask, 0, 255, cv::THRESH_BINARY);
-  } else {
-    cv::cvtColor(image, rgb, image.channels() == 1 ? cv::COLOR_GRAY2RGB : cv::COLOR_BGR2RGB);
-    mask = cv::Mat(rgb.size(), CV_8UC1, cv::Scalar(255));
-  }
-}
 
 nlohmann::json verdictJson(const match::CandidateVerdict& v) {
   nlohmann::json out = {{"method", v.method},
@@ -74,8 +59,8 @@ int matchCommand(const MatchArguments& args) {
         args.config.empty() ? std::nullopt : std::optional<std::filesystem::path>(args.config));
     const match::MatchCascade cascade(config.match);
     cv::Mat a_rgb, a_mask, b_rgb, b_mask;
-    readImage(args.query, a_rgb, a_mask);
-    readImage(args.stored, b_rgb, b_mask);
+    readTextureImage(args.query, a_rgb, a_mask);
+    readTextureImage(args.stored, b_rgb, b_mask);
     const match::TextureDescription query = match::describeTexture(a_rgb, a_mask, config.match);
     auto stored = std::make_shared<match::StoredTexture>();
     stored->id = 1;

@@ -7,10 +7,13 @@
 #include <opencv2/core.hpp>
 #include <opencv2/flann.hpp>
 
+#include "internal/seeded_rng.h"
 #include "tessera/core/error.h"
 
 namespace tessera::match {
 namespace {
+
+constexpr std::uint64_t kSeed = 0x7e55e4a;  // any fixed value: reproducible FLANN
 
 // Below this many vectors a linear scan is as fast as the index and exact.
 constexpr std::size_t kMinIndexed = 256;
@@ -18,19 +21,7 @@ constexpr std::size_t kMinIndexed = 256;
 constexpr int kChecks = 64;
 constexpr int kTrees = 4;
 
-// FLANN's randomised trees draw from this thread's cv::theRNG(). Seeding it for the build makes
-// the index (and so the approximate answers) reproducible; the caller's generator state is
-// restored afterwards.
-class SeededRng {
- public:
-  SeededRng() : saved_(cv::theRNG()) { cv::theRNG() = cv::RNG(0x7e55e4a); }
-  ~SeededRng() { cv::theRNG() = saved_; }
-  SeededRng(const SeededRng&) = delete;
-  SeededRng& operator=(const SeededRng&) = delete;
-
- private:
-  cv::RNG saved_;
-};
+using internal::SeededRng;
 
 }  // namespace
 
@@ -42,7 +33,7 @@ struct CcvIndex::Impl {
 
   void rebuild(std::size_t dims) {
     const cv::Mat rows(static_cast<int>(ids.size()), static_cast<int>(dims), CV_32F, values.data());
-    SeededRng seeded;
+    SeededRng seeded(kSeed);
     // cv::flann::Index keeps its own copy of the rows, so `values` may grow afterwards.
     index = std::make_unique<cv::flann::Index>(rows, cv::flann::KDTreeIndexParams(kTrees),
                                                cvflann::FLANN_DIST_L1);

@@ -10,10 +10,13 @@
 #include <opencv2/flann.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "internal/seeded_rng.h"
 #include "tessera/core/error.h"
 
 namespace tessera::match {
 namespace {
+
+constexpr std::uint64_t kSeed = 0x5eed;  // any fixed value: reproducible FLANN
 
 // Keypoints closer than this to the mask border are dropped: their descriptors would see what
 // lies outside the patch, which differs between two sightings of the same texture.
@@ -26,18 +29,7 @@ constexpr int kChecks = 64;
 constexpr double kClaheClipLimit = 3.0;
 constexpr int kClaheTiles = 8;
 
-// FLANN's randomised trees and LSH tables draw from this thread's cv::theRNG(): seeding it for
-// the match makes matchFeatures deterministic; the caller's generator state is restored.
-class SeededRng {
- public:
-  SeededRng() : saved_(cv::theRNG()) { cv::theRNG() = cv::RNG(0x5eed); }
-  ~SeededRng() { cv::theRNG() = saved_; }
-  SeededRng(const SeededRng&) = delete;
-  SeededRng& operator=(const SeededRng&) = delete;
-
- private:
-  cv::RNG saved_;
-};
+using internal::SeededRng;
 
 cv::Ptr<cv::Feature2D> makeDetector(const FeatureConfig& config) {
   if (config.detector == "sift") return cv::SIFT::create(config.max_features);
@@ -170,7 +162,7 @@ std::optional<FeatureMatch> matchFeatures(const Features& query, const Features&
 
   std::vector<std::vector<cv::DMatch>> nearest;
   {
-    SeededRng seeded;
+    SeededRng seeded(kSeed);
     makeMatcher(query.descriptors.type())
         ->knnMatch(query.descriptors, stored.descriptors, nearest, 2);
   }
