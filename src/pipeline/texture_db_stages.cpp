@@ -125,14 +125,17 @@ CommitStage::CommitStage(db::TextureStore& store, StoreCatalog& catalog,
                          const match::MatchCascade& cascade, std::int64_t run_id)
     : store_(store), catalog_(catalog), cascade_(cascade), run_id_(run_id) {}
 
-std::optional<match::CandidateVerdict> CommitStage::recheck(const MatchedPatch& matched) const {
+std::optional<match::CandidateVerdict> CommitStage::recheck(const MatchedPatch& matched,
+                                                            std::size_t& newer_passing) const {
   const match::TextureDescription& query = *matched.description;
-  const double limit = matched.decision.match ? matched.decision.match->ccv_distance
-                                              : cascade_.config().ccv_max_distance;
+  const double bound = cascade_.config().ccv_max_distance;
+  const double limit = matched.decision.match ? matched.decision.match->ccv_distance : bound;
   std::vector<match::CcvNeighbour> newer;
+  newer_passing = 0;
   for (const auto& texture : committed_) {
     if (texture->id <= matched.snapshot_id) continue;
     const double d = match::ccvDistance(query.ccv.values, texture->description.ccv.values);
+    newer_passing += d <= bound ? 1 : 0;
     const bool nearer = matched.decision.match ? d < limit : d <= limit;
     if (nearer) newer.push_back({texture->id, d});
   }
@@ -160,10 +163,6 @@ CommitRecord CommitStage::process(MatchedPatch matched) {
   record.bitmap_ms = bitmap.build_ms;
   record.describe_ms = matched.describe_ms;
   record.match_ms = matched.decision.ms;
-  record.ccv_considered = matched.decision.considered;
-  record.ccv_removed = matched.decision.considered - matched.decision.passed_ccv;
-  ccv_considered_ += record.ccv_considered;
-  ccv_removed_ += record.ccv_removed;
   match_timer_.add(matched.decision.ms);
   if (!matched.description) return record;
 
@@ -172,8 +171,20 @@ CommitRecord CommitStage::process(MatchedPatch matched) {
   instance.patch_id = bitmap.id;
   instance.version = bitmap.version;
   db::Commit commit;
+  std::size_t newer_passing = 0;
   const std::optional<match::CandidateVerdict> reuse =
-      cascade_.config().enabled ? recheck(matched) : std::nullopt;
+      cascade_.config().enabled ? recheck(matched, newer_passing) : std::nullopt;
+  if (cascade_.config().enabled) {
+    // As if every earlier patch had been committed before this one was matched, whatever the
+    // matcher's snapshot held: the prefilter considered every texture stored so far and let
+    // through at most max_candidates of those within its bound.
+    record.ccv_considered = catalog_.size();
+    const std::size_t passing =
+        std::min(cascade_.config().max_candidates, matched.decision.passed_ccv + newer_passing);
+    record.ccv_removed = record.ccv_considered - std::min(passing, record.ccv_considered);
+    ccv_considered_ += record.ccv_considered;
+    ccv_removed_ += record.ccv_removed;
+  }
   std::shared_ptr<match::StoredTexture> fresh;
   if (reuse) {
     instance.texture_id = reuse->id;

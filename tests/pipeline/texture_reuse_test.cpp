@@ -58,6 +58,8 @@ TEST(TextureReuse, TheSecondTableReusesTheFirstAndOneOrTwoThreadsStoreTheSame) {
   const RunSummary two = runOffice(root / "two", 2);
   EXPECT_EQ(one.textures_stored, two.textures_stored);
   EXPECT_EQ(one.reuses, two.reuses);
+  EXPECT_EQ(one.ccv_considered, two.ccv_considered);
+  EXPECT_EQ(one.ccv_removed, two.ccv_removed);
   EXPECT_EQ(instancesOf(root / "one/textures.db"), instancesOf(root / "two/textures.db"));
   EXPECT_GE(two.reuses, 1u);
   EXPECT_LT(two.pixels_after, two.pixels_before);

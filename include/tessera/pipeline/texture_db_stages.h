@@ -136,8 +136,10 @@ class CommitStage {
 
  private:
   // The cascade over textures committed after the matcher's snapshot, nearer in CCV than the
-  // candidate it accepted (all of them when it accepted none).
-  std::optional<match::CandidateVerdict> recheck(const MatchedPatch& matched) const;
+  // candidate it accepted (all of them when it accepted none); `newer_passing` gets how many
+  // of those textures are within the prefilter's bound.
+  std::optional<match::CandidateVerdict> recheck(const MatchedPatch& matched,
+                                                 std::size_t& newer_passing) const;
 
   db::TextureStore& store_;
   StoreCatalog& catalog_;
