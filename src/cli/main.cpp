@@ -6,6 +6,7 @@
 #include "devices_command.h"
 #include "eval_command.h"
 #include "match_command.h"
+#include "pattern_command.h"
 #include "record_command.h"
 #include "run_command.h"
 #include "tessera/core/error.h"
@@ -33,6 +34,8 @@ int main(int argc, char** argv) {
   CLI::App* db = tessera::cli::addDbCommand(app, db_args);
   tessera::cli::MatchArguments match_args;
   CLI::App* match = tessera::cli::addMatchCommand(app, match_args);
+  tessera::cli::PatternArguments pattern_args;
+  CLI::App* pattern = tessera::cli::addPatternCommand(app, pattern_args);
 
   CLI11_PARSE(app, argc, argv);
   try {
@@ -48,5 +51,6 @@ int main(int argc, char** argv) {
   if (devices->parsed()) return tessera::cli::devicesCommand();
   if (db->parsed()) return tessera::cli::dbCommand(*db, db_args);
   if (match->parsed()) return tessera::cli::matchCommand(match_args);
+  if (pattern->parsed()) return tessera::cli::patternCommand(pattern_args);
   return 0;
 }

@@ -29,11 +29,8 @@ int nearestTexel(double x, int size, bool tiled) {
   return texel >= size ? texel - size : texel;  // x was wrapped into [0, size)
 }
 
-}  // namespace
 
-Rendered renderThrough(const cv::Mat& texture, const cv::Mat& texture_mask,
-                       const core::Similarity2& patch_to_texture, int width, int height,
-                       bool tiled) {
+void checkTexture(const cv::Mat& texture, const cv::Mat& texture_mask, int width, int height) {
   if (texture.empty() || texture.type() != CV_8UC3) {
     throw core::Error("renderThrough: the texture must be a non-empty CV_8UC3");
   }
@@ -44,28 +41,21 @@ Rendered renderThrough(const cv::Mat& texture, const cv::Mat& texture_mask,
   if (width < 0 || height < 0) {
     throw core::Error(fmt::format("renderThrough: negative grid size {}x{}", width, height));
   }
-  Rendered out{cv::Mat(height, width, CV_8UC3, cv::Scalar::all(0)),
-               cv::Mat(height, width, CV_8UC1, cv::Scalar(0))};
-  if (width == 0 || height == 0) return out;
+}
 
-  // Sample points of every texel centre, and which of them land on a valid texture texel
-  // (the nearest one: a texel counts as covered when the texture has a colour there).
-  const double tex_w = texture.cols, tex_h = texture.rows;
-  cv::Mat map_x(height, width, CV_32FC1), map_y(height, width, CV_32FC1);
-  for (int row = 0; row < height; ++row) {
-    auto* mx = map_x.ptr<float>(row);
-    auto* my = map_y.ptr<float>(row);
+// Samples `texture` at texture pixel coordinates (map_x, map_y), wrapped into [0, size) when
+// tiled; a texel is covered when the nearest texture texel exists and is valid.
+Rendered sampleTexture(const cv::Mat& texture, const cv::Mat& texture_mask, const cv::Mat& map_x,
+                       const cv::Mat& map_y, bool tiled) {
+  Rendered out{cv::Mat(map_x.size(), CV_8UC3, cv::Scalar::all(0)),
+               cv::Mat(map_x.size(), CV_8UC1, cv::Scalar(0))};
+  for (int row = 0; row < map_x.rows; ++row) {
+    const auto* mx = map_x.ptr<float>(row);
+    const auto* my = map_y.ptr<float>(row);
     auto* covered = out.covered.ptr<std::uint8_t>(row);
-    for (int col = 0; col < width; ++col) {
-      const Eigen::Vector2d p =
-          patch_to_texture.apply({static_cast<double>(col), static_cast<double>(row)});
-      // Wrapping before the float conversion keeps sub-texel precision for far-off tiles.
-      const double x = tiled ? wrap(p.x(), tex_w) : p.x();
-      const double y = tiled ? wrap(p.y(), tex_h) : p.y();
-      mx[col] = static_cast<float>(x);
-      my[col] = static_cast<float>(y);
-      const int tx = nearestTexel(x, texture.cols, tiled);
-      const int ty = nearestTexel(y, texture.rows, tiled);
+    for (int col = 0; col < map_x.cols; ++col) {
+      const int tx = nearestTexel(mx[col], texture.cols, tiled);
+      const int ty = nearestTexel(my[col], texture.rows, tiled);
       const bool inside = tx >= 0 && ty >= 0 && tx < texture.cols && ty < texture.rows;
       if (inside && (texture_mask.empty() || texture_mask.at<std::uint8_t>(ty, tx) != 0)) {
         covered[col] = 255;
@@ -93,6 +83,53 @@ Rendered renderThrough(const cv::Mat& texture, const cv::Mat& texture_mask,
   }
   out.rgb.setTo(cv::Scalar::all(0), out.covered == 0);
   return out;
+}
+
+}  // namespace
+
+Rendered renderThrough(const cv::Mat& texture, const cv::Mat& texture_mask,
+                       const core::Similarity2& patch_to_texture, int width, int height,
+                       bool tiled) {
+  checkTexture(texture, texture_mask, width, height);
+  if (tiled) {
+    const core::Lattice2 cell{{texture.cols, 0.0}, {0.0, texture.rows}};
+    return renderPattern(texture, texture_mask, cell, patch_to_texture, width, height);
+  }
+  cv::Mat map_x(height, width, CV_32FC1), map_y(height, width, CV_32FC1);
+  for (int row = 0; row < height; ++row) {
+    auto* mx = map_x.ptr<float>(row);
+    auto* my = map_y.ptr<float>(row);
+    for (int col = 0; col < width; ++col) {
+      const Eigen::Vector2d p =
+          patch_to_texture.apply({static_cast<double>(col), static_cast<double>(row)});
+      mx[col] = static_cast<float>(p.x());
+      my[col] = static_cast<float>(p.y());
+    }
+  }
+  return sampleTexture(texture, texture_mask, map_x, map_y, false);
+}
+
+Rendered renderPattern(const cv::Mat& tile, const cv::Mat& tile_mask, const core::Lattice2& lattice,
+                       const core::Similarity2& patch_to_frame, int width, int height) {
+  checkTexture(tile, tile_mask, width, height);
+  if (!(lattice.cellArea() > 1e-9)) {
+    throw core::Error("renderPattern: the lattice's vectors are parallel or zero");
+  }
+  // Patch texel -> frame point q -> lattice coordinates c = L^-1 q -> tile pixel (c1 W, c2 H),
+  // wrapped before the float conversion to keep sub-texel precision for far-off cells.
+  const Eigen::Matrix2d to_lattice = lattice.basis().inverse();
+  cv::Mat map_x(height, width, CV_32FC1), map_y(height, width, CV_32FC1);
+  for (int row = 0; row < height; ++row) {
+    auto* mx = map_x.ptr<float>(row);
+    auto* my = map_y.ptr<float>(row);
+    for (int col = 0; col < width; ++col) {
+      const Eigen::Vector2d c =
+          to_lattice * patch_to_frame.apply({static_cast<double>(col), static_cast<double>(row)});
+      mx[col] = static_cast<float>(wrap(c.x() * tile.cols, tile.cols));
+      my[col] = static_cast<float>(wrap(c.y() * tile.rows, tile.rows));
+    }
+  }
+  return sampleTexture(tile, tile_mask, map_x, map_y, true);
 }
 
 Fidelity measureFidelity(const cv::Mat& patch_rgb, const cv::Mat& patch_mask,

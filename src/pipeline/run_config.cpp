@@ -27,6 +27,7 @@ RunConfig readRunConfig(const core::ConfigDocument& doc) {
     planes::readConfig(root.section("pose_correction"), config.pose_correction);
     texture::readConfig(root.section("textures"), config.textures);
     match::readConfig(root.section("match"), config.match);
+    pattern::readConfig(root.section("pattern"), config.pattern);
   } catch (const core::ConfigError& e) {
     const std::string message = e.what();
     // Range checks inside the stages do not know the file; add it.

@@ -11,6 +11,7 @@
 #include <opencv2/core/mat.hpp>
 #include <opencv2/core/types.hpp>
 
+#include "tessera/core/lattice2.h"
 #include "tessera/core/similarity2.h"
 
 namespace tessera::db {
@@ -18,11 +19,9 @@ namespace tessera::db {
 enum class TextureKind { kSingle, kPattern };
 const char* kindName(TextureKind kind);  // "single" | "pattern"
 
-// A pattern's period vectors in texture pixels; v2 is zero for stripes (one direction).
-struct Lattice {
-  Eigen::Vector2d v1 = Eigen::Vector2d::Zero();
-  Eigen::Vector2d v2 = Eigen::Vector2d::Zero();
-};
+// A pattern's period vectors in its texture frame (see core::Lattice2): the stored image is
+// one cell. For stripes (periodic in one direction) v2 runs along the stripes.
+using Lattice = core::Lattice2;
 
 struct TextureRecord {
   std::int64_t id = 0;  // assigned by the store on commit

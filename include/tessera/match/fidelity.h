@@ -5,6 +5,7 @@
 
 #include <opencv2/core/mat.hpp>
 
+#include "tessera/core/lattice2.h"
 #include "tessera/core/similarity2.h"
 
 namespace tessera::match {
@@ -20,6 +21,12 @@ struct Rendered {
 Rendered renderThrough(const cv::Mat& texture, const cv::Mat& texture_mask,
                        const core::Similarity2& patch_to_texture, int width, int height,
                        bool tiled);
+
+// A pattern: `tile` (CV_8UC3, with `tile_mask` as above) is one cell of `lattice` in the
+// texture frame (core::Lattice2), repeated over the whole plane; `patch_to_frame` maps patch
+// texel centres into that frame. With lattice (W, 0), (0, H) this is renderThrough, tiled.
+Rendered renderPattern(const cv::Mat& tile, const cv::Mat& tile_mask, const core::Lattice2& lattice,
+                       const core::Similarity2& patch_to_frame, int width, int height);
 
 struct Fidelity {
   double psnr_db = 0.0;    // over the patch mask texels the texture covers (99 when identical)

@@ -7,6 +7,7 @@
 #include "tessera/fusion/tracker.h"
 #include "tessera/fusion/tsdf_map.h"
 #include "tessera/match/match_cascade.h"
+#include "tessera/pattern/pattern_config.h"
 #include "tessera/planes/patch_map.h"
 #include "tessera/planes/plane_alignment.h"
 #include "tessera/planes/plane_detector.h"
@@ -32,6 +33,7 @@ struct RunConfig {
   planes::PlaneAlignmentConfig pose_correction;
   texture::BitmapConfig textures;
   match::MatchConfig match;
+  pattern::PatternStageConfig pattern;
 };
 
 // Reads every section of `doc` into a RunConfig and rejects unknown keys.
