@@ -172,6 +172,13 @@ std::optional<Peak> periodAcross(const Autocorrelation& acf, const Eigen::Vector
   return std::nullopt;
 }
 
+// Whether cost `e` is within `ratio` of the best (plus a floor of one grey level in each
+// channel, so that a lossless image's exact zero does not make every other shift fail).
+bool repeatsAsWell(const RepeatCost& e, const RepeatCost& best, double ratio) {
+  constexpr double kFloor = 3.0;
+  return e.mean <= ratio * best.mean + kFloor && e.trimmed <= ratio * best.trimmed + kFloor;
+}
+
 double cross(const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
   return a.x() * b.y() - a.y() * b.x();
 }
@@ -234,15 +241,24 @@ LatticeEstimate estimateLattice(const Autocorrelation& acf, const LatticeConfig&
 
   if (const auto along = stripeDirection(acf, config)) {
     const Eigen::Vector2d across(-along->y(), along->x());
-    if (const auto period = periodAcross(acf, across, config)) {
+    const auto period = periodAcross(acf, across, config);
+    // In colour too, stripes repeat along themselves as well as across.
+    bool repeats_along = true;
+    if (period && repeat_error) {
+      const auto e_across = repeat_error(period->d);
+      const auto e_along = repeat_error(std::max(8.0, period->d.norm()) * *along);
+      repeats_along = e_across && e_along &&
+                      repeatsAsWell(*e_along, *e_across, config.repeat_error_ratio);
+    }
+    if (period && repeats_along) {
       estimate.periodicity = Periodicity::kOneDirection;
       const double t = refineByMultiples(acf, period->d).dot(across);
       estimate.lattice = {t * across, *along};
       if (estimate.lattice.v1.x() < 0.0 || (estimate.lattice.v1.x() == 0 && estimate.lattice.v1.y() < 0))
         estimate.lattice.v1 = -estimate.lattice.v1;
       estimate.score = period->rho;
+      return estimate;
     }
-    return estimate;
   }
 
   std::vector<Peak> peaks = findPeaks(acf, config.min_period_px, config.min_peak);
@@ -255,10 +271,9 @@ LatticeEstimate estimateLattice(const Autocorrelation& acf, const LatticeConfig&
   for (const Peak& p : peaks) highest = std::max(highest, p.rho);
   double floor = std::max(config.min_peak, highest - config.peak_drop);
   if (repeat_error) {
-    // Clear peaks whose colours repeat worst are dropped (their rho set below the floor).
+    // Clear peaks whose colours repeat worse than the best ones are dropped.
     constexpr std::size_t kMaxJudged = 64;
-    constexpr double kErrorFloor = 12.0;  // 2 grey levels in each of 3 channels, squared
-    std::vector<std::pair<Peak*, double>> judged;
+    std::vector<std::pair<Peak*, RepeatCost>> judged;
     for (Peak& p : peaks) {
       if (p.rho < floor) continue;
       if (judged.size() == kMaxJudged) {
@@ -266,12 +281,16 @@ LatticeEstimate estimateLattice(const Autocorrelation& acf, const LatticeConfig&
         continue;
       }
       const auto e = repeat_error(p.d);
-      judged.emplace_back(&p, e ? *e : std::numeric_limits<double>::infinity());
+      constexpr double kUnknown = std::numeric_limits<double>::infinity();
+      judged.emplace_back(&p, e ? *e : RepeatCost{kUnknown, kUnknown});
     }
-    double best = std::numeric_limits<double>::infinity();
-    for (const auto& [p, e] : judged) best = std::min(best, e);
+    RepeatCost best{std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity()};
+    for (const auto& [p, e] : judged) {
+      best.mean = std::min(best.mean, e.mean);
+      best.trimmed = std::min(best.trimmed, e.trimmed);
+    }
     for (auto& [p, e] : judged) {
-      if (std::isfinite(best) && e > config.repeat_error_ratio * best + kErrorFloor) p->rho = -1.0;
+      if (!repeatsAsWell(e, best, config.repeat_error_ratio)) p->rho = -1.0;
     }
     std::erase_if(peaks, [](const Peak& p) { return p.rho < 0.0; });
     if (peaks.empty()) return estimate;

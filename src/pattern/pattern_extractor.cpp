@@ -160,12 +160,12 @@ Scaled scaledForAnalysis(const cv::Mat& rgb, const cv::Mat& mask, const PatternC
   return out;
 }
 
-// Mean squared colour difference (summed over channels) between texels x and x + d, over
-// valid pairs on every third row and column; nothing when too few pairs exist.
-std::optional<double> repeatError(const cv::Mat& rgb, const cv::Mat& mask,
-                                  const Eigen::Vector2d& d) {
-  double sum = 0.0;
-  std::size_t pairs = 0;
+// The repeat cost of shift d (see RepeatCost), over valid pairs on every third row and
+// column; nothing when too few pairs exist.
+std::optional<RepeatCost> repeatError(const cv::Mat& rgb, const cv::Mat& mask,
+                                      const Eigen::Vector2d& d) {
+  std::vector<float> errors;
+  errors.reserve(rgb.total() / 9 + 1);
   std::array<float, 3> colour{};
   for (int row = 0; row < rgb.rows; row += 3) {
     const auto* here = rgb.ptr<cv::Vec3b>(row);
@@ -173,15 +173,25 @@ std::optional<double> repeatError(const cv::Mat& rgb, const cv::Mat& mask,
     for (int col = 0; col < rgb.cols; col += 3) {
       if (valid != nullptr && valid[col] == 0) continue;
       if (!sampleValid(rgb, mask, col + d.x(), row + d.y(), colour)) continue;
+      float sum = 0.0f;
       for (int c = 0; c < 3; ++c) {
-        const double e = colour[static_cast<std::size_t>(c)] - here[col][c];
+        const float e = colour[static_cast<std::size_t>(c)] - here[col][c];
         sum += e * e;
       }
-      ++pairs;
+      errors.push_back(sum);
     }
   }
-  if (pairs < 64) return std::nullopt;
-  return sum / static_cast<double>(pairs);
+  if (errors.size() < 64) return std::nullopt;
+  RepeatCost cost;
+  double total = 0.0;
+  for (const float e : errors) total += e;
+  cost.mean = total / static_cast<double>(errors.size());
+  const auto kept = errors.begin() + static_cast<long>(0.6 * static_cast<double>(errors.size()));
+  std::nth_element(errors.begin(), kept, errors.end());
+  double lower = 0.0;
+  for (auto it = errors.begin(); it != kept; ++it) lower += *it;
+  cost.trimmed = lower / static_cast<double>(std::max<long>(1, kept - errors.begin()));
+  return cost;
 }
 
 LatticeEstimate estimateOn(const Scaled& scaled, const PatternConfig& config) {
@@ -193,8 +203,12 @@ LatticeEstimate estimateOn(const Scaled& scaled, const PatternConfig& config) {
   }
   grey = locallyNormalised(grey, scaled.mask,
                            std::max(8.0, std::max(grey.cols, grey.rows) / 8.0));
-  const RepeatError colour_error = [&scaled](const Eigen::Vector2d& d) {
-    return repeatError(scaled.rgb, scaled.mask, d);
+  // Colours compared blurred a little, so that a shift between texels (whose bilinear
+  // samples are smoother than the texels) is not judged worse than a whole-texel one.
+  cv::Mat smooth_rgb;
+  cv::GaussianBlur(scaled.rgb, smooth_rgb, cv::Size(), 1.0);
+  const RepeatError colour_error = [&smooth_rgb, &scaled](const Eigen::Vector2d& d) {
+    return repeatError(smooth_rgb, scaled.mask, d);
   };
   return estimateLattice(autocorrelate(grey, scaled.mask), config.lattice, colour_error);
 }

@@ -39,13 +39,19 @@ struct LatticeEstimate {
   double score = 0.0;  // autocorrelation at the period vectors (the lower of the two)
 };
 
-// How badly the texture repeats over a shift (lower is better; nothing: cannot tell).
-using RepeatError = std::function<std::optional<double>(const Eigen::Vector2d&)>;
+// How badly the texture repeats over a shift: the mean squared colour difference between
+// texels x and x + d, over all pairs and over the better 60 % (which an occluder does not
+// reach). Lower is better; nothing: cannot tell.
+struct RepeatCost {
+  double mean = 0.0, trimmed = 0.0;
+};
+using RepeatError = std::function<std::optional<RepeatCost>(const Eigen::Vector2d&)>;
 
 // The lattice of the autocorrelation's clear peaks. With `repeat_error`, only the clear peaks
-// (at most the 64 shortest) whose repeat error is within config.repeat_error_ratio of the
-// best one's (plus a floor) count: a near-repeat inside the true tile correlates almost as
-// well in grey as the true period, but repeats its colours worse.
+// (at most the 64 shortest) whose repeat costs are both within config.repeat_error_ratio of
+// the best ones (plus a floor) count: a near-repeat inside the true tile correlates almost as
+// well in grey as the true period, but repeats its colours worse. Stripes must repeat along
+// themselves as well as across.
 LatticeEstimate estimateLattice(const Autocorrelation& acf, const LatticeConfig& config = {},
                                 const RepeatError& repeat_error = {});
 

@@ -24,7 +24,7 @@ struct PatternConfig {
   LatticeConfig lattice;
   // A faithful tiling, over the texels it explains (overlays left out):
   double min_psnr_db = 20.0;    // ... at least this PSNR
-  double min_explained = 0.6;   // ... explains this share of the bitmap's colour variance
+  double min_explained = 0.5;   // ... explains this share of the bitmap's colour variance
   double max_overlay_share = 0.35;  // ... leaves at most this share unexplained
   double min_repeats = 3.0;     // ... from at least this many cells' worth of bitmap
   // Unexplained texels: colour error above this many robust noise deviations (and at least
