@@ -62,10 +62,15 @@ int matchCommand(const MatchArguments& args) {
     readTextureImage(args.query, a_rgb, a_mask);
     readTextureImage(args.stored, b_rgb, b_mask);
     const match::TextureDescription query = match::describeTexture(a_rgb, a_mask, config.match);
-    auto stored = std::make_shared<match::StoredTexture>();
-    stored->id = 1;
-    stored->pattern = args.pattern;
-    stored->description = match::describeTexture(b_rgb, b_mask, config.match);
+    std::shared_ptr<match::StoredTexture> stored;
+    if (args.pattern) {  // B is one period in each direction
+      const core::Lattice2 cell{{b_rgb.cols, 0.0}, {0.0, b_rgb.rows}};
+      stored = match::patternTexture(1, b_rgb, b_mask, cell, config.match);
+    } else {
+      stored = std::make_shared<match::StoredTexture>();
+      stored->id = 1;
+      stored->description = match::describeTexture(b_rgb, b_mask, config.match);
+    }
 
     const double distance = match::ccvDistance(query.ccv.values, stored->description.ccv.values);
     const bool passes = distance <= config.match.ccv_max_distance;
@@ -89,8 +94,8 @@ int matchCommand(const MatchArguments& args) {
       fmt::print("{}\n", accepted ? "match: A reuses B" : "no match: A is stored on its own");
     }
     if (!args.render.empty() && verdict.transform) {
-      const match::Rendered render = match::renderThrough(b_rgb, b_mask, *verdict.transform,
-                                                          a_rgb.cols, a_rgb.rows, args.pattern);
+      const match::Rendered render =
+          match::renderStored(*stored, *verdict.transform, a_rgb.cols, a_rgb.rows);
       cv::Mat bgr;
       cv::cvtColor(render.rgb, bgr, cv::COLOR_RGB2BGR);
       if (!cv::imwrite(args.render, bgr)) {

@@ -167,9 +167,16 @@ std::optional<InstanceRender> renderInstance(const nlohmann::json& patch,
   }
   cv::Mat rgb, alpha;
   readRgba(run_dir / instance->at("image").get<std::string>(), rgb, alpha);
-  match::Rendered rendered =
-      match::renderThrough(rgb, alpha, shown.transform, texture->at("width").get<int>(),
-                           texture->at("height").get<int>(), shown.tiled);
+  const int width = texture->at("width").get<int>(), height = texture->at("height").get<int>();
+  const auto lattice = instance->find("lattice");
+  match::Rendered rendered;
+  if (lattice != instance->end() && lattice->is_array() && lattice->size() == 4) {
+    const core::Lattice2 cell{{lattice->at(0).get<double>(), lattice->at(1).get<double>()},
+                              {lattice->at(2).get<double>(), lattice->at(3).get<double>()}};
+    rendered = match::renderPattern(rgb, alpha, cell, shown.transform, width, height);
+  } else {
+    rendered = match::renderThrough(rgb, alpha, shown.transform, width, height, shown.tiled);
+  }
   shown.rgb = std::move(rendered.rgb);
   shown.covered = std::move(rendered.covered);
   return shown;

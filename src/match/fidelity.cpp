@@ -142,8 +142,16 @@ Fidelity measureFidelity(const cv::Mat& patch_rgb, const cv::Mat& patch_mask,
       (patch_mask.type() != CV_8UC1 || patch_mask.size() != patch_rgb.size())) {
     throw core::Error("measureFidelity: the patch mask must be CV_8UC1 of the bitmap's size");
   }
-  const Rendered rendered =
-      renderThrough(texture, texture_mask, patch_to_texture, patch_rgb.cols, patch_rgb.rows, tiled);
+  return measureFidelity(patch_rgb, patch_mask,
+                         renderThrough(texture, texture_mask, patch_to_texture, patch_rgb.cols,
+                                       patch_rgb.rows, tiled));
+}
+
+Fidelity measureFidelity(const cv::Mat& patch_rgb, const cv::Mat& patch_mask,
+                         const Rendered& rendered) {
+  if (rendered.rgb.size() != patch_rgb.size()) {
+    throw core::Error("measureFidelity: the render is not of the patch's size");
+  }
   std::size_t in_mask = 0, compared = 0;
   double squared_error = 0.0;
   for (int row = 0; row < patch_rgb.rows; ++row) {

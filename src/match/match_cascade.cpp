@@ -54,6 +54,51 @@ double structureAgreement(const cv::Mat& a, const cv::Mat& b, const cv::Mat& mas
 
 }  // namespace
 
+std::shared_ptr<StoredTexture> patternTexture(std::int64_t id, const cv::Mat& tile_rgb,
+                                              const cv::Mat& tile_mask,
+                                              const core::Lattice2& lattice,
+                                              const MatchConfig& config) {
+  auto stored = std::make_shared<StoredTexture>();
+  stored->id = id;
+  stored->pattern = true;
+  stored->lattice = lattice;
+  stored->tile_rgb = tile_rgb;
+  stored->tile_mask = tile_mask.empty() ? cv::Mat(tile_rgb.size(), CV_8UC1, cv::Scalar(255))
+                                        : tile_mask;
+  // The cell's bounding box in the frame: the template NCC looks for in a new bitmap (any
+  // placement of it is the pattern at some phase).
+  const Eigen::Vector2d corners[] = {Eigen::Vector2d::Zero(), lattice.v1, lattice.v2,
+                                     lattice.v1 + lattice.v2};
+  Eigen::Vector2d low = corners[0], high = corners[0];
+  for (const Eigen::Vector2d& c : corners) low = low.cwiseMin(c), high = high.cwiseMax(c);
+  stored->swatch_origin = low.array().floor();
+  const auto swatch = [&](double width, double height) {
+    return renderPattern(stored->tile_rgb, stored->tile_mask, lattice,
+                         {1.0, 0.0, stored->swatch_origin.x(), stored->swatch_origin.y()},
+                         std::max(1, static_cast<int>(std::ceil(width))),
+                         std::max(1, static_cast<int>(std::ceil(height))));
+  };
+  const Rendered cell = swatch(high.x() - stored->swatch_origin.x(),
+                               high.y() - stored->swatch_origin.y());
+  stored->description.rgb = cell.rgb;
+  stored->description.mask = cell.covered;
+  // Colour coherence judged on a swatch of several cells, as a wall's bitmap shows them.
+  const double side = std::max({256.0, 2.0 * (high.x() - low.x()), 2.0 * (high.y() - low.y())});
+  const Rendered large = swatch(side, side);
+  stored->description.ccv = computeCcv(large.rgb, large.covered, config.ccv);
+  return stored;
+}
+
+Rendered renderStored(const StoredTexture& stored, const core::Similarity2& patch_to_texture,
+                      int width, int height) {
+  if (stored.pattern) {
+    return renderPattern(stored.tile_rgb, stored.tile_mask, stored.lattice, patch_to_texture,
+                         width, height);
+  }
+  return renderThrough(stored.description.rgb, stored.description.mask, patch_to_texture, width,
+                       height, false);
+}
+
 TextureDescription describeTexture(const cv::Mat& rgb, const cv::Mat& mask,
                                    const MatchConfig& config) {
   TextureDescription description;
@@ -132,7 +177,9 @@ std::optional<core::Similarity2> MatchCascade::findPattern(const TextureDescript
   // New texel p -> rotated stored image: p - offset (stored inside) or p + offset.
   const double sign = stored_inside ? -1.0 : 1.0;
   const core::Similarity2 shift{1.0, 0.0, sign * best.x, sign * best.y};
-  return shift.then(unrotate(best_turns, stored_grey.cols, stored_grey.rows));
+  // Swatch pixel -> texture frame (a pattern's swatch starts at swatch_origin).
+  const core::Similarity2 to_frame{1.0, 0.0, stored.swatch_origin.x(), stored.swatch_origin.y()};
+  return shift.then(unrotate(best_turns, stored_grey.cols, stored_grey.rows)).then(to_frame);
 }
 
 CandidateVerdict MatchCascade::tryCandidate(const TextureDescription& query,
@@ -157,10 +204,8 @@ CandidateVerdict MatchCascade::tryCandidate(const TextureDescription& query,
   if (!transform) return verdict;
   verdict.transform = transform;
 
-  const Rendered render = renderThrough(stored.description.rgb, stored.description.mask, *transform,
-                                        query.rgb.cols, query.rgb.rows, stored.pattern);
-  const Fidelity fidelity = measureFidelity(query.rgb, query.mask, stored.description.rgb,
-                                            stored.description.mask, *transform, stored.pattern);
+  const Rendered render = renderStored(stored, *transform, query.rgb.cols, query.rgb.rows);
+  const Fidelity fidelity = measureFidelity(query.rgb, query.mask, render);
   verdict.psnr_db = fidelity.psnr_db;
   verdict.coverage = fidelity.coverage;
   cv::Mat compared;

@@ -12,6 +12,7 @@
 
 #include "tessera/core/error.h"
 #include "tessera/match/fidelity.h"
+#include "lattice_refinement.h"
 
 namespace tessera::pattern {
 
@@ -351,7 +352,8 @@ PatternAnalysis analysePattern(const cv::Mat& rgb, const cv::Mat& mask,
   estimate.lattice.v1 /= scaled.f;
   if (!stripes) estimate.lattice.v2 /= scaled.f;
   if (!chosen) return finish();
-  const core::Lattice2 full{chosen->v1 / scaled.f, chosen->v2 / scaled.f};
+  core::Lattice2 full{chosen->v1 / scaled.f, chosen->v2 / scaled.f};
+  if (scaled.f < 1.0) full = refineLattice(rgb, mask, full, stripes ? 1 : 2);
   Pattern pattern = tileAndJudge(rgb, mask, full, estimate.periodicity, config, share);
   analysis.reason = unfaithfulness(pattern, share, config);
   if (analysis.reason.empty()) analysis.pattern = std::move(pattern);

@@ -76,7 +76,7 @@ void bindMapTextures(const CommitStage& commits, const StoreCatalog& catalog,
       continue;
     }
     const db::TextureInstance& instance = it->second;
-    const cv::Mat& rgb = stored->description.rgb;
+    const cv::Mat& rgb = stored->storedRgb();
     planes::MapTexture shown;
     shown.texture_id = instance.texture_id;
     shown.image = fmt::format("textures/texture_{}.png", instance.texture_id);
@@ -84,20 +84,21 @@ void bindMapTextures(const CommitStage& commits, const StoreCatalog& catalog,
     shown.height = rgb.rows;
     shown.transform = instance.transform;
     shown.tiled = stored->pattern;
+    if (stored->pattern) shown.lattice = stored->lattice;
     shown.reused = instance.reused;
     shown.psnr_db = instance.psnr_db;
     if (used.insert(instance.texture_id).second) {
-      texture::writeRgbaPng(out_dir / shown.image, rgb, stored->description.mask);
+      texture::writeRgbaPng(out_dir / shown.image, rgb, stored->storedMask());
       summary.pixels_after += rgb.total();
     }
     summary.textured_patches += 1;
-    if (instance.reused) {
-      summary.reuses += 1;
-      if (instance.psnr_db) summary.reuse_psnrs_db.push_back(*instance.psnr_db);
-    }
+    summary.reuses += instance.reused ? 1 : 0;
+    // A reuse or a pattern shows the patch through another image: its fidelity counts.
+    if (instance.psnr_db) summary.shown_psnrs_db.push_back(*instance.psnr_db);
     binding.map_texture = shown;
   }
   summary.textures_stored = commits.texturesStored();
+  summary.patterns_stored = commits.patternsStored();
   summary.commit_failures = commits.commitFailures();
   summary.ccv_considered = commits.ccvConsidered();
   summary.ccv_removed = commits.ccvRemoved();
@@ -130,7 +131,7 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
   const std::int64_t run_id = store->beginRun(source.name());
   const match::MatchCascade cascade(config.match);
   StoreCatalog catalog(*store, config.match);
-  const MatchStage match_stage(texture_stage, cascade, catalog);
+  const MatchStage match_stage(texture_stage, cascade, catalog, config.pattern);
   CommitStage commit_stage(*store, catalog, cascade, run_id);
 
   const auto start = std::chrono::steady_clock::now();
@@ -280,7 +281,7 @@ void writeReport(const RunSummary& summary, const std::filesystem::path& path) {
                               ? json(static_cast<double>(summary.pixels_before) /
                                      static_cast<double>(summary.pixels_after))
                               : json(nullptr);
-  std::vector<double> psnrs = summary.reuse_psnrs_db;
+  std::vector<double> psnrs = summary.shown_psnrs_db;
   std::sort(psnrs.begin(), psnrs.end());
   report["patch_psnr_mean"] = psnrs.empty()
                                   ? json(nullptr)

@@ -416,6 +416,7 @@ void StatsSink::writeCommit(const CommitRecord& record, std::size_t batch, std::
                            {"bitmap_ms", record.bitmap_ms},
                            {"describe_ms", record.describe_ms},
                            {"match_ms", record.match_ms},
+                           {"pattern_ms", record.pattern_ms},
                            {"commit_latency_ms", record.commit_latency_ms},
                            {"textures_stored", textures_stored}};
     if (record.instance) {

@@ -27,9 +27,14 @@ cv::Mat validTexels(const texture::PatchBitmap& bitmap) {
 
 std::shared_ptr<const match::StoredTexture> storedTextureOf(const db::TextureRecord& record,
                                                             const match::MatchConfig& config) {
+  if (record.kind == db::TextureKind::kPattern) {
+    // Without a lattice (never written so), the image is one period in each direction.
+    const core::Lattice2 cell = record.lattice.value_or(
+        core::Lattice2{{record.rgb.cols, 0.0}, {0.0, record.rgb.rows}});
+    return match::patternTexture(record.id, record.rgb, record.mask, cell, config);
+  }
   auto stored = std::make_shared<match::StoredTexture>();
   stored->id = record.id;
-  stored->pattern = record.kind == db::TextureKind::kPattern;
   match::TextureDescription& description = stored->description;
   description.rgb = record.rgb;
   description.mask = record.mask;
@@ -117,8 +122,41 @@ MatchedPatch MatchStage::process(const PatchJob& job) const {
   } catch (const std::exception& e) {  // one patch's failure costs its matching, not the run
     spdlog::warn("patch {} version {}: not matched: {}", job.patch.id, job.patch.version, e.what());
     matched.description.reset();
+    return matched;
   }
+  if (!matched.decision.match && patterns_.enabled) findPattern(matched);
   return matched;
+}
+
+void MatchStage::findPattern(MatchedPatch& matched) const {
+  const match::TextureDescription& bitmap = *matched.description;
+  try {
+    pattern::PatternAnalysis analysis =
+        pattern::analysePattern(bitmap.rgb, bitmap.mask, patterns_.extractor);
+    matched.pattern_ms = analysis.ms;
+    if (!analysis.pattern) return;
+    // Stored only if the tiling shows the patch as faithfully as a reuse must, over all its
+    // texels: a wall with a poster the pattern does not explain keeps its own bitmap.
+    const pattern::Pattern& found = *analysis.pattern;
+    const match::Fidelity fidelity = match::measureFidelity(
+        bitmap.rgb, bitmap.mask,
+        match::renderPattern(found.tile_rgb, found.tile_mask, found.lattice, {}, bitmap.rgb.cols,
+                             bitmap.rgb.rows));
+    const match::MatchConfig& limits = cascade_.config();
+    if (fidelity.psnr_db >= limits.min_psnr_db && fidelity.coverage >= limits.min_coverage) {
+      matched.pattern = std::move(analysis.pattern);
+      matched.pattern_fidelity = fidelity;
+    } else {
+      spdlog::debug("patch {} version {}: a {}x{} pattern tile shows it at {:.1f} dB over {:.0f} % "
+                    "of it, short of a reuse's {:.1f} dB over {:.0f} %: stored whole",
+                    matched.bitmap->id, matched.bitmap->version, found.tile_rgb.cols,
+                    found.tile_rgb.rows, fidelity.psnr_db, 100.0 * fidelity.coverage,
+                    limits.min_psnr_db, 100.0 * limits.min_coverage);
+    }
+  } catch (const std::exception& e) {  // the bitmap is then stored as it is
+    spdlog::warn("patch {} version {}: no pattern analysis: {}", matched.bitmap->id,
+                 matched.bitmap->version, e.what());
+  }
 }
 
 CommitStage::CommitStage(db::TextureStore& store, StoreCatalog& catalog,
@@ -163,7 +201,8 @@ CommitRecord CommitStage::process(MatchedPatch matched) {
   record.bitmap_ms = bitmap.build_ms;
   record.describe_ms = matched.describe_ms;
   record.match_ms = matched.decision.ms;
-  match_timer_.add(matched.decision.ms);
+  record.pattern_ms = matched.pattern_ms;
+  match_timer_.add(matched.decision.ms + matched.pattern_ms);
   if (!matched.description) return record;
 
   db::TextureInstance instance;
@@ -205,18 +244,37 @@ CommitRecord CommitStage::process(MatchedPatch matched) {
     texture.content_key = db::contentKey(texture.rgb, texture.mask);
     texture.run_id = run_id_;
     texture.source_patch = bitmap.id;
+    if (matched.pattern) {  // one cell of the pattern, the bitmap at its origin (phase 0)
+      const pattern::Pattern& found = *matched.pattern;
+      texture.kind = db::TextureKind::kPattern;
+      texture.rgb = found.tile_rgb;
+      texture.mask = found.tile_mask;
+      texture.lattice = found.lattice;
+      texture.feature_kind.clear();
+      texture.keypoints.clear();
+      texture.descriptors = cv::Mat();
+      texture.content_key = db::contentKey(texture.rgb, texture.mask);
+      instance.psnr_db = matched.pattern_fidelity->psnr_db;
+    }
     // The very same pixels already stored (a rerun of a recording): that texture, as it is.
     if (const auto existing = store_.findByContentKey(texture.content_key)) {
       instance.texture_id = *existing;
-      instance.psnr_db = 99.0;
+      instance.psnr_db = matched.pattern ? matched.pattern_fidelity->psnr_db : 99.0;
       instance.reused = true;
       record.method = "same pixels";
     } else {
+      if (matched.pattern) {
+        fresh = match::patternTexture(0, texture.rgb, texture.mask, *texture.lattice,
+                                      cascade_.config());
+        texture.ccv = fresh->description.ccv.values;
+        record.method = "pattern";
+      } else {
+        fresh = std::make_shared<match::StoredTexture>();
+        fresh->description = *matched.description;
+        record.method = "stored";
+      }
       commit.textures.push_back(std::move(texture));
       instance.texture_id = -1;
-      record.method = "stored";
-      fresh = std::make_shared<match::StoredTexture>();
-      fresh->description = *matched.description;
     }
   }
   commit.instances.push_back(instance);
@@ -235,11 +293,12 @@ CommitRecord CommitStage::process(MatchedPatch matched) {
     committed_.push_back(fresh);
     catalog_.add(fresh);
     ++textures_stored_;
+    patterns_stored_ += fresh->pattern ? 1 : 0;
   }
   if (!texture_pixels_.count(instance.texture_id)) {
     const auto stored = catalog_.load(instance.texture_id);
     texture_pixels_[instance.texture_id] =
-        stored ? stored->description.rgb.total() : bitmap.grid.texels();
+        stored ? stored->storedRgb().total() : bitmap.grid.texels();
   }
   instances_[bitmap.id] = instance;
   record.instance = instance;

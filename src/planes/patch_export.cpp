@@ -52,7 +52,12 @@ Eigen::Vector2d textureCoordinates(const TextureBinding& texture, double u, doub
     // Pixel-centre coordinates on the patch's grid, through the instance, back to corners.
     const Eigen::Vector2d texel(d.dot(texture.x_axis) / texture.texel_m - 0.5,
                                 d.dot(texture.y_axis) / texture.texel_m - 0.5);
-    const Eigen::Vector2d q = shown->transform.apply(texel) + Eigen::Vector2d(0.5, 0.5);
+    const Eigen::Vector2d frame = shown->transform.apply(texel);
+    if (shown->lattice) {  // lattice coordinates: the image spans one cell, [0, 1) each way
+      const Eigen::Vector2d c = shown->lattice->coordinatesOf(frame);
+      return {c.x() + 0.5 / shown->width, 1.0 - (c.y() + 0.5 / shown->height)};
+    }
+    const Eigen::Vector2d q = frame + Eigen::Vector2d(0.5, 0.5);
     const double s = q.x() / shown->width, t = 1.0 - q.y() / shown->height;
     if (shown->tiled) return {s, t};
     return {std::clamp(s, 0.0, 1.0), std::clamp(t, 0.0, 1.0)};
@@ -193,6 +198,11 @@ void writePatchesJson(const PatchMap& map, const std::filesystem::path& path,
                        {"height", shown.height},
                        {"transform", {s.a, s.b, s.tx, s.ty}},
                        {"tiled", shown.tiled},
+                       {"lattice", shown.lattice ? nlohmann::json{shown.lattice->v1.x(),
+                                                                  shown.lattice->v1.y(),
+                                                                  shown.lattice->v2.x(),
+                                                                  shown.lattice->v2.y()}
+                                                 : nlohmann::json(nullptr)},
                        {"reused", shown.reused},
                        {"psnr_db", shown.psnr_db ? nlohmann::json(*shown.psnr_db) : nullptr}};
     }

@@ -34,7 +34,11 @@ struct Fidelity {
   std::size_t texels = 0;  // mask texels compared
 };
 
-// PSNR of the rendered texture against `patch_rgb` (CV_8UC3) over `patch_mask` (CV_8UC1).
+// PSNR of a render against `patch_rgb` (CV_8UC3) over `patch_mask` (CV_8UC1).
+Fidelity measureFidelity(const cv::Mat& patch_rgb, const cv::Mat& patch_mask,
+                         const Rendered& rendered);
+
+// The same for `texture` rendered through `patch_to_texture` (see renderThrough).
 Fidelity measureFidelity(const cv::Mat& patch_rgb, const cv::Mat& patch_mask,
                          const cv::Mat& texture, const cv::Mat& texture_mask,
                          const core::Similarity2& patch_to_texture, bool tiled);

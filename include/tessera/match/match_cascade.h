@@ -18,6 +18,8 @@
 #include "tessera/match/ccv.h"
 #include "tessera/match/ccv_index.h"
 #include "tessera/match/feature_matcher.h"
+#include "tessera/match/fidelity.h"
+#include "tessera/core/lattice2.h"
 
 namespace tessera::match {
 
@@ -50,8 +52,29 @@ TextureDescription describeTexture(const cv::Mat& rgb, const cv::Mat& mask,
 struct StoredTexture {
   std::int64_t id = 0;
   bool pattern = false;  // a tile that repeats
+  // Singles: the texture itself. Patterns: a swatch of the pattern in its texture frame (one
+  // cell's bounding box, the NCC template; its CCV from a larger swatch), whose pixel (0, 0)
+  // is frame point `swatch_origin`.
   TextureDescription description;
+  // Patterns: one cell of `lattice` (core::Lattice2) in the texture frame, as stored.
+  core::Lattice2 lattice;
+  cv::Mat tile_rgb, tile_mask;
+  Eigen::Vector2d swatch_origin = Eigen::Vector2d::Zero();
+
+  // The stored image and its size in pixels (the tile for a pattern).
+  const cv::Mat& storedRgb() const { return pattern ? tile_rgb : description.rgb; }
+  const cv::Mat& storedMask() const { return pattern ? tile_mask : description.mask; }
 };
+
+// A pattern texture from its tile and lattice: the swatch and its description (CCV only).
+std::shared_ptr<StoredTexture> patternTexture(std::int64_t id, const cv::Mat& tile_rgb,
+                                              const cv::Mat& tile_mask,
+                                              const core::Lattice2& lattice,
+                                              const MatchConfig& config);
+
+// A stored texture rendered through `patch_to_texture` onto a width x height patch grid.
+Rendered renderStored(const StoredTexture& stored, const core::Similarity2& patch_to_texture,
+                      int width, int height);
 
 // Where candidates come from: the database through its CCV index, or a list in memory.
 class TextureCatalog {

@@ -77,7 +77,7 @@ struct RunSummary {
   std::size_t reuses = 0;            // ... of which reuse a texture stored before them
   std::size_t commit_failures = 0;
   std::size_t pixels_before = 0, pixels_after = 0;
-  std::vector<double> reuse_psnrs_db;  // fidelity of each reuse in the map
+  std::vector<double> shown_psnrs_db;  // fidelity of each reuse or pattern in the map
   std::size_t ccv_considered = 0, ccv_removed = 0;
   std::optional<double> commit_latency_ms_p50, commit_latency_ms_p95;
   std::optional<double> match_ms_p50;

@@ -16,6 +16,7 @@
 
 #include "tessera/db/texture_store.h"
 #include "tessera/match/match_cascade.h"
+#include "tessera/pattern/pattern_config.h"
 #include "tessera/pipeline/stage_timer.h"
 #include "tessera/pipeline/stages.h"
 #include "tessera/planes/patch_map.h"
@@ -45,6 +46,11 @@ struct MatchedPatch {
   std::optional<texture::PatchBitmap> bitmap;  // nothing when it could not be built
   std::optional<match::TextureDescription> description;
   match::MatchDecision decision;
+  // A bitmap that matched nothing: its periodic pattern, when one reproduces it as faithfully
+  // as a reuse must (then stored instead of the bitmap), and what the tiling scored.
+  std::optional<pattern::Pattern> pattern;
+  std::optional<match::Fidelity> pattern_fidelity;
+  double pattern_ms = 0.0;
   double describe_ms = 0.0;      // CCV and features of the new bitmap
   std::int64_t snapshot_id = 0;  // the newest texture the matcher could see
   SteadyTime finalized_at;
@@ -92,27 +98,33 @@ class StoreCatalog : public match::TextureCatalog {
 std::shared_ptr<const match::StoredTexture> storedTextureOf(const db::TextureRecord& record,
                                                             const match::MatchConfig& config);
 
-// Builds each patch's bitmap, describes it and matches it (thread-safe: many at once).
+// Builds each patch's bitmap, describes it and matches it; a bitmap that matches nothing is
+// analysed for a periodic pattern (thread-safe: many at once).
 class MatchStage {
  public:
   MatchStage(const TextureStage& textures, const match::MatchCascade& cascade,
-             const StoreCatalog& catalog)
-      : textures_(textures), cascade_(cascade), catalog_(catalog) {}
+             const StoreCatalog& catalog, const pattern::PatternStageConfig& patterns)
+      : textures_(textures), cascade_(cascade), catalog_(catalog), patterns_(patterns) {}
   MatchedPatch process(const PatchJob& job) const;
 
  private:
+  void findPattern(MatchedPatch& matched) const;
+
   const TextureStage& textures_;
   const match::MatchCascade& cascade_;
   const StoreCatalog& catalog_;
+  pattern::PatternStageConfig patterns_;
 };
 
 // What one commit decided, for stats.jsonl.
 struct CommitRecord {
   int patch_id = 0, version = 0;
   std::optional<db::TextureInstance> instance;  // nothing: no bitmap, or the commit failed
-  std::string method;                           // "ncc", "features", "same pixels", "stored"
+  // "ncc", "features", "same pixels", "stored" or "pattern"
+  std::string method;
   std::size_t ccv_considered = 0, ccv_removed = 0;
-  double bitmap_ms = 0.0, describe_ms = 0.0, match_ms = 0.0, commit_latency_ms = 0.0;
+  double bitmap_ms = 0.0, describe_ms = 0.0, match_ms = 0.0, pattern_ms = 0.0;
+  double commit_latency_ms = 0.0;
 };
 
 // Serial, in finalization order: re-check, store, remember the map's instances.
@@ -127,6 +139,7 @@ class CommitStage {
   const std::map<int, db::TextureInstance>& instances() const { return instances_; }
   const std::map<std::int64_t, std::size_t>& texturePixels() const { return texture_pixels_; }
   std::size_t texturesStored() const { return textures_stored_; }
+  std::size_t patternsStored() const { return patterns_stored_; }
   std::size_t commitFailures() const { return commit_failures_; }
   std::size_t ccvConsidered() const { return ccv_considered_; }
   std::size_t ccvRemoved() const { return ccv_removed_; }
@@ -148,7 +161,7 @@ class CommitStage {
   std::vector<std::shared_ptr<const match::StoredTexture>> committed_;  // this run, ascending id
   std::map<int, db::TextureInstance> instances_;
   std::map<std::int64_t, std::size_t> texture_pixels_;
-  std::size_t textures_stored_ = 0, commit_failures_ = 0;
+  std::size_t textures_stored_ = 0, patterns_stored_ = 0, commit_failures_ = 0;
   std::size_t ccv_considered_ = 0, ccv_removed_ = 0;
   std::vector<double> commit_latencies_ms_;
   StageTimer match_timer_, timer_;

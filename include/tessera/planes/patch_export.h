@@ -8,6 +8,7 @@
 #include <optional>
 #include <string>
 
+#include "tessera/core/lattice2.h"
 #include "tessera/core/similarity2.h"
 #include "tessera/planes/patch_map.h"
 
@@ -15,13 +16,15 @@ namespace tessera::planes {
 
 // The database texture a patch shows in the map: its own bitmap as stored, or a texture it
 // reuses. Patch texel centre (col, row) -> texture pixel centre through `transform`; a pattern
-// tile repeats (texture coordinates beyond [0, 1]).
+// tile repeats (texture coordinates beyond [0, 1]). A pattern with a lattice: `transform`
+// maps into its texture frame, where the image is one cell of the lattice (core::Lattice2).
 struct MapTexture {
   std::int64_t texture_id = 0;
   std::string image;  // RGBA PNG, relative to the output folder
   int width = 0, height = 0;
   core::Similarity2 transform;
   bool tiled = false;
+  std::optional<core::Lattice2> lattice;
   bool reused = false;
   std::optional<double> psnr_db;  // fidelity of a reuse
 };
