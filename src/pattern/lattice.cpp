@@ -172,11 +172,12 @@ std::optional<Peak> periodAcross(const Autocorrelation& acf, const Eigen::Vector
   return std::nullopt;
 }
 
-// Whether cost `e` is within `ratio` of the best (plus a floor of one grey level in each
-// channel, so that a lossless image's exact zero does not make every other shift fail).
+// Whether cost `e` is within `ratio` of the best, plus a floor: 0.3 % of what unrelated texels
+// cost (what resampling between texels costs an exact period), and at least one grey level
+// in each channel, so that a lossless image's exact zero does not make every other shift fail.
 bool repeatsAsWell(const RepeatCost& e, const RepeatCost& best, double ratio) {
-  constexpr double kFloor = 3.0;
-  return e.mean <= ratio * best.mean + kFloor && e.trimmed <= ratio * best.trimmed + kFloor;
+  const double floor = std::max(3.0, 0.003 * e.unrelated);
+  return e.mean <= ratio * best.mean + floor && e.trimmed <= ratio * best.trimmed + floor;
 }
 
 double cross(const Eigen::Vector2d& a, const Eigen::Vector2d& b) {

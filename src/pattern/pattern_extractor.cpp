@@ -161,29 +161,39 @@ Scaled scaledForAnalysis(const cv::Mat& rgb, const cv::Mat& mask, const PatternC
   return out;
 }
 
-// The repeat cost of shift d (see RepeatCost), over valid pairs on every third row and
-// column; nothing when too few pairs exist.
+// The repeat cost of shift d (see RepeatCost), over valid pairs centred on every third row
+// and column; nothing when too few pairs exist.
 std::optional<RepeatCost> repeatError(const cv::Mat& rgb, const cv::Mat& mask,
                                       const Eigen::Vector2d& d) {
   std::vector<float> errors;
   errors.reserve(rgb.total() / 9 + 1);
-  std::array<float, 3> colour{};
+  // Compared at x - d/2 and x + d/2, so that both samples are interpolated by the same
+  // fraction of a texel: a shift between texels is not judged worse for being smoothed.
+  std::array<float, 3> back{}, ahead{};
+  std::array<double, 3> colour_sum{}, colour_squares{};
+  const Eigen::Vector2d half = 0.5 * d;
   for (int row = 0; row < rgb.rows; row += 3) {
-    const auto* here = rgb.ptr<cv::Vec3b>(row);
-    const std::uint8_t* valid = mask.empty() ? nullptr : mask.ptr<std::uint8_t>(row);
     for (int col = 0; col < rgb.cols; col += 3) {
-      if (valid != nullptr && valid[col] == 0) continue;
-      if (!sampleValid(rgb, mask, col + d.x(), row + d.y(), colour)) continue;
+      if (!sampleValid(rgb, mask, col - half.x(), row - half.y(), back) ||
+          !sampleValid(rgb, mask, col + half.x(), row + half.y(), ahead)) {
+        continue;
+      }
       float sum = 0.0f;
-      for (int c = 0; c < 3; ++c) {
-        const float e = colour[static_cast<std::size_t>(c)] - here[col][c];
-        sum += e * e;
+      for (std::size_t c = 0; c < 3; ++c) {
+        sum += (ahead[c] - back[c]) * (ahead[c] - back[c]);
+        colour_sum[c] += back[c];
+        colour_squares[c] += back[c] * back[c];
       }
       errors.push_back(sum);
     }
   }
   if (errors.size() < 64) return std::nullopt;
   RepeatCost cost;
+  const auto n = static_cast<double>(errors.size());
+  for (std::size_t c = 0; c < 3; ++c) {
+    const double mean = colour_sum[c] / n;
+    cost.unrelated += 2.0 * (colour_squares[c] / n - mean * mean);
+  }
   double total = 0.0;
   for (const float e : errors) total += e;
   cost.mean = total / static_cast<double>(errors.size());

@@ -44,6 +44,7 @@ struct LatticeEstimate {
 // reach). Lower is better; nothing: cannot tell.
 struct RepeatCost {
   double mean = 0.0, trimmed = 0.0;
+  double unrelated = 0.0;  // what two unrelated texels would cost: twice the colour variance
 };
 using RepeatError = std::function<std::optional<RepeatCost>(const Eigen::Vector2d&)>;
 
