@@ -39,9 +39,11 @@ cv::Mat texture(int width, int height, unsigned seed) {
 
 std::shared_ptr<StoredTexture> stored(std::int64_t id, const cv::Mat& rgb, bool pattern,
                                       const MatchConfig& config) {
+  if (pattern) {  // the image is one period each way
+    return patternTexture(id, rgb, cv::Mat(), {{rgb.cols, 0.0}, {0.0, rgb.rows}}, config);
+  }
   auto s = std::make_shared<StoredTexture>();
   s->id = id;
-  s->pattern = pattern;
   s->description = describeTexture(rgb, cv::Mat(), config);
   return s;
 }

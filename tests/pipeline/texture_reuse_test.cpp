@@ -58,6 +58,8 @@ TEST(TextureReuse, TheSecondTableReusesTheFirstAndOneOrTwoThreadsStoreTheSame) {
   const RunSummary two = runOffice(root / "two", 2);
   EXPECT_EQ(one.textures_stored, two.textures_stored);
   EXPECT_EQ(one.reuses, two.reuses);
+  EXPECT_EQ(one.patterns_stored, two.patterns_stored);
+  EXPECT_GE(two.patterns_stored, 1u);  // the tiled floor, or a brick wall, as one cell
   EXPECT_EQ(one.ccv_considered, two.ccv_considered);
   EXPECT_EQ(one.ccv_removed, two.ccv_removed);
   EXPECT_EQ(instancesOf(root / "one/textures.db"), instancesOf(root / "two/textures.db"));
@@ -79,7 +81,7 @@ TEST(TextureReuse, TheSecondTableReusesTheFirstAndOneOrTwoThreadsStoreTheSame) {
   ASSERT_TRUE(texture_of_plane.count("table_1.top") && texture_of_plane.count("table_2.top"));
   EXPECT_EQ(texture_of_plane["table_1.top"], texture_of_plane["table_2.top"]);
   EXPECT_TRUE(second_table_reused.value_or(false));
-  for (const double psnr : two.reuse_psnrs_db) {
+  for (const double psnr : two.shown_psnrs_db) {  // reuses and patterns
     EXPECT_GE(psnr, loadRunConfig(std::nullopt).match.min_psnr_db);
   }
 }
