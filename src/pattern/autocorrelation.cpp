@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "tessera/core/error.h"
 
@@ -60,6 +61,7 @@ Autocorrelation autocorrelate(const cv::Mat& grey, const cv::Mat& mask, double m
     m.setTo(0.0f, mask == 0);
   }
   const double valid = cv::sum(m)[0];
+  const bool full = valid >= static_cast<double>(grey.total());
   Autocorrelation out;
   out.radius_x = grey.cols / 2;
   out.radius_y = grey.rows / 2;
@@ -69,19 +71,47 @@ Autocorrelation autocorrelate(const cv::Mat& grey, const cv::Mat& mask, double m
   const double mean = cv::sum(grey.mul(m))[0] / valid;
   const cv::Mat f = (grey - mean).mul(m);
   const cv::Mat f2 = f.mul(f);
-  // Padded so that shifts up to the image size never wrap (the linear correlation's support).
-  const cv::Size padded(cv::getOptimalDFTSize(2 * grey.cols - 1),
-                        cv::getOptimalDFTSize(2 * grey.rows - 1));
-  const cv::Mat F = spectrum(f, padded), M = spectrum(m, padded), F2 = spectrum(f2, padded);
-  const cv::Mat ff = correlation(F, F);      // sum f(x) f(x+d)
-  const cv::Mat f2m = correlation(F2, M);    // sum f(x)^2 m(x+d); sum m(x) f(x+d)^2 is at -d
-  const cv::Mat mm = correlation(M, M);      // overlap count
+  // Padded so that the shifts kept (up to the radius) never wrap: a circular correlation over
+  // P texels holds the linear one at d and at d - P, and the latter is empty when
+  // P >= size + radius.
+  const cv::Size padded(cv::getOptimalDFTSize(grey.cols + out.radius_x + 1),
+                        cv::getOptimalDFTSize(grey.rows + out.radius_y + 1));
+  const cv::Mat F = spectrum(f, padded);
+  const cv::Mat ff = correlation(F, F);  // sum f(x) f(x+d)
+  // Energies sum f(x)^2 m(x+d) and sum m(x) f(x+d)^2, and the overlap count: by correlation
+  // with the mask in general; over a full mask the overlap is a rectangle, whose sums an
+  // integral image gives without two more spectra.
+  cv::Mat f2m, mm, f2_sums;
+  if (full) {
+    cv::integral(f2, f2_sums, CV_64F);
+  } else {
+    const cv::Mat M = spectrum(m, padded), F2 = spectrum(f2, padded);
+    f2m = correlation(F2, M);  // sum f(x)^2 m(x+d); sum m(x) f(x+d)^2 is at -d
+    mm = correlation(M, M);
+  }
+  // Sum of f^2 over the texels x with x and x + d both inside the image.
+  const auto rectangleEnergy = [&](int dx, int dy) {
+    const int x0 = std::max(0, -dx), x1 = grey.cols - std::max(0, dx);
+    const int y0 = std::max(0, -dy), y1 = grey.rows - std::max(0, dy);
+    return f2_sums.at<double>(y1, x1) - f2_sums.at<double>(y0, x1) - f2_sums.at<double>(y1, x0) +
+           f2_sums.at<double>(y0, x0);
+  };
   const double min_count = std::max(1.0, min_overlap * valid);
   for (int dy = -out.radius_y; dy <= out.radius_y; ++dy) {
     auto* row = out.rho.ptr<float>(out.radius_y + dy);
     for (int dx = -out.radius_x; dx <= out.radius_x; ++dx) {
-      if (at(mm, dx, dy) < min_count) continue;
-      const double e1 = at(f2m, dx, dy), e2 = at(f2m, -dx, -dy);
+      double count = 0.0, e1 = 0.0, e2 = 0.0;
+      if (full) {
+        count = static_cast<double>(grey.cols - std::abs(dx)) * (grey.rows - std::abs(dy));
+        if (count < min_count) continue;
+        e1 = rectangleEnergy(dx, dy);
+        e2 = rectangleEnergy(-dx, -dy);
+      } else {
+        count = at(mm, dx, dy);
+        if (count < min_count) continue;
+        e1 = at(f2m, dx, dy);
+        e2 = at(f2m, -dx, -dy);
+      }
       if (e1 <= 1e-9 || e2 <= 1e-9) continue;
       const double r = at(ff, dx, dy) / std::sqrt(e1 * e2);
       row[out.radius_x + dx] = static_cast<float>(std::clamp(r, -1.0, 1.0));

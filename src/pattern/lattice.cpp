@@ -175,9 +175,11 @@ std::optional<Peak> periodAcross(const Autocorrelation& acf, const Eigen::Vector
 // Whether cost `e` is within `ratio` of the best, plus a floor: 0.3 % of what unrelated texels
 // cost (what resampling between texels costs an exact period), and at least one grey level
 // in each channel, so that a lossless image's exact zero does not make every other shift fail.
+double repeatFloor(const RepeatCost& e) { return std::max(3.0, 0.003 * e.unrelated); }
+bool within(double e, double best, double ratio, double floor) { return e <= ratio * best + floor; }
 bool repeatsAsWell(const RepeatCost& e, const RepeatCost& best, double ratio) {
-  const double floor = std::max(3.0, 0.003 * e.unrelated);
-  return e.mean <= ratio * best.mean + floor && e.trimmed <= ratio * best.trimmed + floor;
+  const double floor = repeatFloor(e);
+  return within(e.mean, best.mean, ratio, floor) && within(e.trimmed, best.trimmed, ratio, floor);
 }
 
 double cross(const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
@@ -271,6 +273,8 @@ LatticeEstimate estimateLattice(const Autocorrelation& acf, const LatticeConfig&
   double highest = 0.0;
   for (const Peak& p : peaks) highest = std::max(highest, p.rho);
   double floor = std::max(config.min_peak, highest - config.peak_drop);
+  constexpr double kUnknown = std::numeric_limits<double>::infinity();
+  RepeatCost best{kUnknown, kUnknown};
   if (repeat_error) {
     // Clear peaks whose colours repeat worse than the best ones are dropped.
     constexpr std::size_t kMaxJudged = 64;
@@ -282,13 +286,17 @@ LatticeEstimate estimateLattice(const Autocorrelation& acf, const LatticeConfig&
         continue;
       }
       const auto e = repeat_error(p.d);
-      constexpr double kUnknown = std::numeric_limits<double>::infinity();
       judged.emplace_back(&p, e ? *e : RepeatCost{kUnknown, kUnknown});
     }
-    RepeatCost best{std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity()};
+    // The trimmed cost first: an occluder raises every long shift's mean cost (its pairs
+    // with the pattern fail), so the mean is compared only among the shifts whose better
+    // 60 % repeat as well as the best's, where it catches a near-repeat that differs over
+    // less than the trimmed share of the texels.
+    for (const auto& [p, e] : judged) best.trimmed = std::min(best.trimmed, e.trimmed);
     for (const auto& [p, e] : judged) {
-      best.mean = std::min(best.mean, e.mean);
-      best.trimmed = std::min(best.trimmed, e.trimmed);
+      if (within(e.trimmed, best.trimmed, config.repeat_error_ratio, repeatFloor(e))) {
+        best.mean = std::min(best.mean, e.mean);
+      }
     }
     for (auto& [p, e] : judged) {
       if (!repeatsAsWell(e, best, config.repeat_error_ratio)) p->rho = -1.0;
@@ -307,6 +315,18 @@ LatticeEstimate estimateLattice(const Autocorrelation& acf, const LatticeConfig&
   };
   auto second = std::find_if(peaks.begin(), peaks.end(),
                              [&](const Peak& p) { return p.rho >= floor && independent(p); });
+  if (second == peaks.end() && repeat_error) {
+    // Among those, one whose colours repeat (over the better 60 %, which an occluder that
+    // weakened the peak does not reach) as well as the clear peaks' do.
+    constexpr int kMaxFallbacks = 16;
+    int tried = 0;
+    second = std::find_if(peaks.begin(), peaks.end(), [&](const Peak& p) {
+      if (!independent(p) || tried >= kMaxFallbacks) return false;
+      ++tried;
+      const auto e = repeat_error(p.d);
+      return e && within(e->trimmed, best.trimmed, config.repeat_error_ratio, repeatFloor(*e));
+    });
+  }
   if (second == peaks.end()) second = std::find_if(peaks.begin(), peaks.end(), independent);
   if (second == peaks.end()) {  // one direction of repeats, but the texture changes along it
     estimate.periodicity = Periodicity::kOneDirection;

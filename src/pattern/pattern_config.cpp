@@ -22,7 +22,11 @@ void readConfig(const core::ConfigSection& section, PatternStageConfig& config) 
   section.read("overlay_sigmas", p.overlay_sigmas);
   section.read("min_overlay_error", p.min_overlay_error);
   section.read("min_overlay_px", p.min_overlay_px);
+  section.read("max_tile_repetitions", p.max_tile_repetitions);
   if (p.analysis_max_px < 16) throw core::ConfigError("pattern: analysis_max_px must be >= 16");
+  if (p.max_tile_repetitions < 0 || (p.max_tile_repetitions > 0 && p.max_tile_repetitions < 3)) {
+    throw core::ConfigError("pattern: max_tile_repetitions must be 0 (all) or >= 3");
+  }
   if (p.lattice.min_peak <= 0.0 || p.lattice.min_peak >= 1.0 || p.lattice.peak_drop < 0.0 ||
       p.blur_sigma_px < 0.0 || p.lattice.stripe_rho <= 0.0 || p.lattice.stripe_rho > 1.0) {
     throw core::ConfigError(

@@ -11,34 +11,12 @@
 #include <opencv2/imgproc.hpp>
 
 #include "tessera/core/error.h"
-#include "tessera/match/fidelity.h"
 #include "lattice_refinement.h"
+#include "tiling.h"
 
 namespace tessera::pattern {
 
 namespace {
-
-// Bilinear colour at (x, y) when all four neighbours are valid texels.
-bool sampleValid(const cv::Mat& rgb, const cv::Mat& mask, double x, double y,
-                 std::array<float, 3>& colour) {
-  const int x0 = static_cast<int>(std::floor(x)), y0 = static_cast<int>(std::floor(y));
-  if (x0 < 0 || y0 < 0 || x0 + 1 >= rgb.cols || y0 + 1 >= rgb.rows) return false;
-  if (!mask.empty() && (mask.at<std::uint8_t>(y0, x0) == 0 || mask.at<std::uint8_t>(y0, x0 + 1) == 0 ||
-                        mask.at<std::uint8_t>(y0 + 1, x0) == 0 ||
-                        mask.at<std::uint8_t>(y0 + 1, x0 + 1) == 0)) {
-    return false;
-  }
-  const double fx = x - x0, fy = y - y0;
-  const auto& p00 = rgb.at<cv::Vec3b>(y0, x0);
-  const auto& p01 = rgb.at<cv::Vec3b>(y0, x0 + 1);
-  const auto& p10 = rgb.at<cv::Vec3b>(y0 + 1, x0);
-  const auto& p11 = rgb.at<cv::Vec3b>(y0 + 1, x0 + 1);
-  for (int c = 0; c < 3; ++c) {
-    colour[static_cast<std::size_t>(c)] = static_cast<float>(
-        (1 - fy) * ((1 - fx) * p00[c] + fx * p01[c]) + fy * ((1 - fx) * p10[c] + fx * p11[c]));
-  }
-  return true;
-}
 
 // Texel size of the stored cell: about one bitmap texel per tile pixel.
 cv::Size tileSize(const core::Lattice2& lattice) {
@@ -54,34 +32,30 @@ struct Faithfulness {
 };
 
 // How well the tiling reproduces the bitmap, and which blobs it leaves unexplained.
-Faithfulness judgeTiling(const cv::Mat& rgb, const cv::Mat& mask, const cv::Mat& tiled,
-                         const cv::Mat& covered, const PatternConfig& config) {
+Faithfulness judgeTiling(const cv::Mat& rgb, const TilingError& tiling,
+                         const PatternConfig& config) {
   Faithfulness out;
-  cv::Mat valid = covered.clone();
-  if (!mask.empty()) cv::bitwise_and(valid, mask, valid);
-  const int valid_count = cv::countNonZero(valid);
-  if (valid_count == 0) return out;
-
-  // Per-texel colour error (RMS over the channels) and its robust spread.
-  cv::Mat a, b, diff, error;
-  rgb.convertTo(a, CV_32FC3);
-  tiled.convertTo(b, CV_32FC3);
-  cv::absdiff(a, b, diff);
-  diff = diff.mul(diff);
-  cv::transform(diff, error, cv::Matx13f(1.0f / 3, 1.0f / 3, 1.0f / 3));
-  cv::sqrt(error, error);
-  std::vector<float> errors;
-  errors.reserve(static_cast<std::size_t>(valid_count));
+  const cv::Mat& error = tiling.error;
+  const cv::Mat& valid = tiling.valid;
+  // The median error from a histogram of 1/8 grey level bins (a sort would cost more than all
+  // the rest of the judgement).
+  constexpr double kBinsPerLevel = 8.0;
+  std::vector<int> histogram(static_cast<std::size_t>(256 * kBinsPerLevel) + 1, 0);
+  int valid_texels = 0;
   for (int row = 0; row < error.rows; ++row) {
     const auto* e = error.ptr<float>(row);
     const auto* v = valid.ptr<std::uint8_t>(row);
     for (int col = 0; col < error.cols; ++col) {
-      if (v[col] != 0) errors.push_back(e[col]);
+      if (v[col] == 0) continue;
+      ++histogram[std::min(histogram.size() - 1, static_cast<std::size_t>(e[col] * kBinsPerLevel))];
+      ++valid_texels;
     }
   }
-  const auto middle = errors.begin() + static_cast<long>(errors.size() / 2);
-  std::nth_element(errors.begin(), middle, errors.end());
-  const double sigma = 1.4826 * *middle;
+  if (valid_texels == 0) return out;
+  const auto valid_count = static_cast<double>(valid_texels);
+  std::size_t bin = 0;
+  for (int below = 0; below + histogram[bin] <= valid_texels / 2; ++bin) below += histogram[bin];
+  const double sigma = 1.4826 * (static_cast<double>(bin) + 0.5) / kBinsPerLevel;
   const double threshold = std::max(config.overlay_sigmas * sigma, config.min_overlay_error);
 
   // Unexplained blobs: the error, averaged over a few texels so that an object's texels that
@@ -90,55 +64,88 @@ Faithfulness judgeTiling(const cv::Mat& rgb, const cv::Mat& mask, const cv::Mat&
   cv::Mat smooth;
   cv::blur(error, smooth, {7, 7});
   cv::Mat high = (smooth > threshold) & valid;
-  std::vector<std::vector<cv::Point>> contours;
-  cv::findContours(high, contours, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_SIMPLE);
   out.unexplained = cv::Mat(rgb.size(), CV_8UC1, cv::Scalar(0));
-  for (std::size_t i = 0; i < contours.size(); ++i) {
-    if (cv::contourArea(contours[i]) < config.min_overlay_px) continue;
-    cv::drawContours(out.unexplained, contours, static_cast<int>(i), cv::Scalar(255), cv::FILLED);
-    out.overlays.push_back(cv::boundingRect(contours[i]));
+  if (cv::countNonZero(high) > 0) {
+    std::vector<std::vector<cv::Point>> contours;
+    cv::findContours(high, contours, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_SIMPLE);
+    for (std::size_t i = 0; i < contours.size(); ++i) {
+      if (cv::contourArea(contours[i]) < config.min_overlay_px) continue;
+      cv::drawContours(out.unexplained, contours, static_cast<int>(i), cv::Scalar(255), cv::FILLED);
+      out.overlays.push_back(cv::boundingRect(contours[i]));
+    }
+    if (!out.overlays.empty()) {
+      cv::dilate(out.unexplained, out.unexplained,
+                 cv::getStructuringElement(cv::MORPH_ELLIPSE, {5, 5}));
+      out.unexplained &= valid;
+    }
   }
-  cv::dilate(out.unexplained, out.unexplained,
-             cv::getStructuringElement(cv::MORPH_ELLIPSE, {5, 5}));
-  out.unexplained &= valid;
   std::sort(out.overlays.begin(), out.overlays.end(),
             [](const cv::Rect& p, const cv::Rect& q) { return p.area() > q.area(); });
-  out.unexplained_share = cv::countNonZero(out.unexplained) / static_cast<double>(valid_count);
+  out.unexplained_share = cv::countNonZero(out.unexplained) / valid_count;
 
-  // PSNR and explained variance over the texels the tiling explains.
-  const cv::Mat explained = valid & (out.unexplained == 0);
-  const double n = cv::countNonZero(explained);
+  // PSNR and explained variance over the texels the tiling explains: sums of the squared
+  // residual (3 e^2 a texel) and of each channel and its square.
+  double n = 0.0, sse = 0.0;
+  std::array<double, 3> sum{}, sum2{};
+  for (int row = 0; row < rgb.rows; ++row) {
+    const auto* p = rgb.ptr<cv::Vec3b>(row);
+    const auto* e = error.ptr<float>(row);
+    const auto* v = valid.ptr<std::uint8_t>(row);
+    const auto* u = out.unexplained.ptr<std::uint8_t>(row);
+    for (int col = 0; col < rgb.cols; ++col) {
+      if (v[col] == 0 || u[col] != 0) continue;
+      n += 1.0;
+      sse += 3.0 * static_cast<double>(e[col]) * e[col];
+      for (int c = 0; c < 3; ++c) {
+        const double x = p[col][c];
+        sum[static_cast<std::size_t>(c)] += x;
+        sum2[static_cast<std::size_t>(c)] += x * x;
+      }
+    }
+  }
   if (n < 1.0) return out;
-  diff.setTo(cv::Scalar::all(0), explained == 0);
-  const cv::Scalar residual = cv::sum(diff);
-  cv::Scalar mean, stddev;
-  cv::meanStdDev(a, mean, stddev, explained);
-  const double sse_total = residual[0] + residual[1] + residual[2];
-  const double sst = n * (stddev[0] * stddev[0] + stddev[1] * stddev[1] + stddev[2] * stddev[2]);
-  const double mse = sse_total / (3.0 * n);
+  double sst = 0.0;
+  for (std::size_t c = 0; c < 3; ++c) sst += sum2[c] - sum[c] * sum[c] / n;
+  const double mse = sse / (3.0 * n);
   out.psnr_db = mse > 0.0 ? std::min(99.0, 10.0 * std::log10(255.0 * 255.0 / mse)) : 99.0;
-  out.explained = sst > 0.0 ? 1.0 - sse_total / sst : 0.0;
+  out.explained = sst > 0.0 ? 1.0 - sse / sst : 0.0;
+  return out;
+}
+
+// A Gaussian blur of standard deviation `sigma` approximated by three box filters of equal
+// width w, whose variance is 3 (w^2 - 1) / 12 (central limit; Wells 1986): each box costs the
+// same whatever its width, where a direct Gaussian of the wide sigma here would dominate.
+cv::Mat wideBlur(const cv::Mat& image, double sigma) {
+  const int half = std::max(1, static_cast<int>(std::lround(0.5 * (std::sqrt(4.0 * sigma * sigma + 1.0) - 1.0))));
+  const cv::Size box(2 * half + 1, 2 * half + 1);
+  cv::Mat out;
+  cv::blur(image, out, box);
+  cv::blur(out, out, box);
+  cv::blur(out, out, box);
   return out;
 }
 
 // The grey image with its local mean removed and its local contrast made one (normalised
-// convolution over the mask, Gaussian of `sigma`): a bright occluder or a lighting gradient
+// convolution over the mask, a wide blur of `sigma`): a bright occluder or a lighting gradient
 // would otherwise dominate the autocorrelation with its own broad bump.
 cv::Mat locallyNormalised(const cv::Mat& grey, const cv::Mat& mask, double sigma) {
-  cv::Mat m(grey.size(), CV_32FC1, cv::Scalar(1));
-  if (!mask.empty()) m.setTo(0.0f, mask == 0);
-  const auto masked_blur = [&m, sigma](const cv::Mat& image) {
-    cv::Mat num, den;
-    cv::GaussianBlur(image.mul(m), num, cv::Size(), sigma);
-    cv::GaussianBlur(m, den, cv::Size(), sigma);
-    return cv::Mat(num / cv::max(den, 1e-3));
+  cv::Mat m;
+  cv::Mat den;
+  if (!mask.empty()) {
+    cv::Mat(mask != 0).convertTo(m, CV_32F, 1.0 / 255.0);
+    den = cv::max(wideBlur(m, sigma), 1e-3);
+  }
+  const auto masked_blur = [&m, &den, sigma](const cv::Mat& image) {
+    if (m.empty()) return wideBlur(image, sigma);
+    return cv::Mat(wideBlur(image.mul(m), sigma) / den);
   };
   const cv::Mat centred = grey - masked_blur(grey);
   cv::Mat deviation;
   cv::sqrt(masked_blur(centred.mul(centred)), deviation);
   // 2 grey levels of floor: a plain region stays low instead of becoming amplified noise.
-  const cv::Mat out = centred / (deviation + 2.0f);
-  return out.mul(m);
+  cv::Mat out = centred / (deviation + 2.0f);
+  if (!m.empty()) out = out.mul(m);
+  return out;
 }
 
 // The bitmap scaled to at most analysis_max_px a side (INTER_AREA), where the lattice is
@@ -161,28 +168,65 @@ Scaled scaledForAnalysis(const cv::Mat& rgb, const cv::Mat& mask, const PatternC
   return out;
 }
 
+namespace {
+
+// Bilinear sampling at a fixed sub-texel offset o: the four neighbours at floor(o) and weights
+// that are the same for every texel.
+struct FixedShift {
+  int ox = 0, oy = 0;
+  std::array<float, 4> w{};
+  explicit FixedShift(const Eigen::Vector2d& o) {
+    const double x0 = std::floor(o.x()), y0 = std::floor(o.y());
+    ox = static_cast<int>(x0);
+    oy = static_cast<int>(y0);
+    const auto fx = static_cast<float>(o.x() - x0), fy = static_cast<float>(o.y() - y0);
+    w = {(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy};
+  }
+  // The colour at (row, col) + o, when its four neighbours are valid.
+  bool sample(const cv::Mat& rgb, const cv::Mat& mask, int row, int col,
+              std::array<float, 3>& colour) const {
+    const int y = row + oy, x = col + ox;
+    if (!mask.empty() &&
+        (mask.at<std::uint8_t>(y, x) == 0 || mask.at<std::uint8_t>(y, x + 1) == 0 ||
+         mask.at<std::uint8_t>(y + 1, x) == 0 || mask.at<std::uint8_t>(y + 1, x + 1) == 0)) {
+      return false;
+    }
+    const auto* top = rgb.ptr<cv::Vec3b>(y) + x;
+    const auto* bottom = rgb.ptr<cv::Vec3b>(y + 1) + x;
+    for (int c = 0; c < 3; ++c) {
+      colour[static_cast<std::size_t>(c)] =
+          w[0] * top[0][c] + w[1] * top[1][c] + w[2] * bottom[0][c] + w[3] * bottom[1][c];
+    }
+    return true;
+  }
+};
+
+}  // namespace
+
 // The repeat cost of shift d (see RepeatCost), over valid pairs centred on every third row
-// and column; nothing when too few pairs exist.
+// and column; nothing when too few pairs exist. The pair is x - d/2 and x + d/2, so that both
+// samples are interpolated by the same fraction of a texel: a shift between texels is not
+// judged worse for being smoothed.
 std::optional<RepeatCost> repeatError(const cv::Mat& rgb, const cv::Mat& mask,
                                       const Eigen::Vector2d& d) {
+  const FixedShift back(-0.5 * d), ahead(0.5 * d);
+  // Rows and columns where both samples' neighbours lie inside the bitmap.
+  const int row0 = std::max({0, -back.oy, -ahead.oy});
+  const int row1 = std::min({rgb.rows, rgb.rows - back.oy - 1, rgb.rows - ahead.oy - 1});
+  const int col0 = std::max({0, -back.ox, -ahead.ox});
+  const int col1 = std::min({rgb.cols, rgb.cols - back.ox - 1, rgb.cols - ahead.ox - 1});
   std::vector<float> errors;
   errors.reserve(rgb.total() / 9 + 1);
-  // Compared at x - d/2 and x + d/2, so that both samples are interpolated by the same
-  // fraction of a texel: a shift between texels is not judged worse for being smoothed.
-  std::array<float, 3> back{}, ahead{};
+  std::array<float, 3> a{}, b{};
   std::array<double, 3> colour_sum{}, colour_squares{};
-  const Eigen::Vector2d half = 0.5 * d;
-  for (int row = 0; row < rgb.rows; row += 3) {
-    for (int col = 0; col < rgb.cols; col += 3) {
-      if (!sampleValid(rgb, mask, col - half.x(), row - half.y(), back) ||
-          !sampleValid(rgb, mask, col + half.x(), row + half.y(), ahead)) {
-        continue;
-      }
+  for (int row = row0 + (3 - row0 % 3) % 3; row < row1; row += 3) {
+    for (int col = col0 + (3 - col0 % 3) % 3; col < col1; col += 3) {
+      if (!back.sample(rgb, mask, row, col, a) || !ahead.sample(rgb, mask, row, col, b)) continue;
       float sum = 0.0f;
       for (std::size_t c = 0; c < 3; ++c) {
-        sum += (ahead[c] - back[c]) * (ahead[c] - back[c]);
-        colour_sum[c] += back[c];
-        colour_squares[c] += back[c] * back[c];
+        sum += (b[c] - a[c]) * (b[c] - a[c]);
+        colour_sum[c] += a[c];
+        colour_squares[c] += a[c] * a[c];
       }
       errors.push_back(sum);
     }
@@ -249,10 +293,10 @@ Pattern tileAndJudge(const cv::Mat& rgb, const cv::Mat& mask, const core::Lattic
   const double valid = mask.empty() ? static_cast<double>(rgb.total()) : cv::countNonZero(mask);
   pattern.repeats = valid / cell.cellArea();
   const cv::Size size = tileSize(cell);
-  averageTile(rgb, mask, cell, size.width, size.height, pattern.tile_rgb, pattern.tile_mask);
-  const match::Rendered tiled = match::renderPattern(pattern.tile_rgb, pattern.tile_mask, cell,
-                                                     core::Similarity2{}, rgb.cols, rgb.rows);
-  Faithfulness judged = judgeTiling(rgb, mask, tiled.rgb, tiled.covered, config);
+  averageTile(rgb, mask, cell, size.width, size.height, pattern.tile_rgb, pattern.tile_mask,
+              config.max_tile_repetitions);
+  const TilingError tiling = tilingError(rgb, mask, pattern.tile_rgb, pattern.tile_mask, cell);
+  Faithfulness judged = judgeTiling(rgb, tiling, config);
   pattern.psnr_db = judged.psnr_db;
   pattern.explained = judged.explained;
   pattern.unexplained = std::move(judged.unexplained);
@@ -276,48 +320,6 @@ std::string unfaithfulness(const Pattern& p, double unexplained_share,
 }
 
 }  // namespace
-
-void averageTile(const cv::Mat& rgb, const cv::Mat& mask, const core::Lattice2& lattice, int width,
-                 int height, cv::Mat& tile_rgb, cv::Mat& tile_mask) {
-  tile_rgb = cv::Mat(height, width, CV_8UC3, cv::Scalar::all(0));
-  tile_mask = cv::Mat(height, width, CV_8UC1, cv::Scalar(0));
-  // The range of cells (n, m) that reach the bitmap: its corners in lattice coordinates.
-  Eigen::Vector2d low(1e18, 1e18), high(-1e18, -1e18);
-  for (const Eigen::Vector2d& corner :
-       {Eigen::Vector2d(0, 0), Eigen::Vector2d(rgb.cols, 0), Eigen::Vector2d(0, rgb.rows),
-        Eigen::Vector2d(rgb.cols, rgb.rows)}) {
-    const Eigen::Vector2d c = lattice.coordinatesOf(corner);
-    low = low.cwiseMin(c);
-    high = high.cwiseMax(c);
-  }
-  const int n0 = static_cast<int>(std::floor(low.x())) - 1, n1 = static_cast<int>(std::ceil(high.x()));
-  const int m0 = static_cast<int>(std::floor(low.y())) - 1, m1 = static_cast<int>(std::ceil(high.y()));
-  std::array<std::vector<float>, 3> samples;
-  std::array<float, 3> colour{};
-  for (int j = 0; j < height; ++j) {
-    for (int i = 0; i < width; ++i) {
-      const Eigen::Vector2d q0 = (i / static_cast<double>(width)) * lattice.v1 +
-                                 (j / static_cast<double>(height)) * lattice.v2;
-      for (auto& s : samples) s.clear();
-      for (int m = m0; m <= m1; ++m) {
-        for (int n = n0; n <= n1; ++n) {
-          const Eigen::Vector2d q = q0 + n * lattice.v1 + m * lattice.v2;
-          if (!sampleValid(rgb, mask, q.x(), q.y(), colour)) continue;
-          for (std::size_t c = 0; c < 3; ++c) samples[c].push_back(colour[c]);
-        }
-      }
-      if (samples[0].empty()) continue;
-      cv::Vec3b& out = tile_rgb.at<cv::Vec3b>(j, i);
-      for (std::size_t c = 0; c < 3; ++c) {
-        auto& s = samples[c];
-        const auto middle = s.begin() + static_cast<long>(s.size() / 2);
-        std::nth_element(s.begin(), middle, s.end());
-        out[static_cast<int>(c)] = cv::saturate_cast<std::uint8_t>(*middle);
-      }
-      tile_mask.at<std::uint8_t>(j, i) = 255;
-    }
-  }
-}
 
 PatternAnalysis analysePattern(const cv::Mat& rgb, const cv::Mat& mask,
                                const PatternConfig& config) {

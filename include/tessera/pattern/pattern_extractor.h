@@ -32,6 +32,10 @@ struct PatternConfig {
   double overlay_sigmas = 4.0;
   double min_overlay_error = 24.0;
   int min_overlay_px = 64;
+  // A tile texel is the median of at most this many repetitions, in cells spread evenly over
+  // the bitmap (0: all): the median of 32 already has a tenth of the noise of one texel, and
+  // a bitmap of small cells would otherwise cost a median over hundreds.
+  int max_tile_repetitions = 32;
 };
 
 struct Pattern {
@@ -62,8 +66,9 @@ PatternAnalysis analysePattern(const cv::Mat& rgb, const cv::Mat& mask,
                                const PatternConfig& config = {});
 
 // The tile of `lattice`'s cell at the origin, W x H, each texel the per-channel median of the
-// bitmap at all its repetitions (bilinear over valid texels).
+// bitmap at all its repetitions (bilinear over valid texels); with max_repetitions > 0, at
+// the repetitions in that many cells spread evenly over the bitmap.
 void averageTile(const cv::Mat& rgb, const cv::Mat& mask, const core::Lattice2& lattice, int width,
-                 int height, cv::Mat& tile_rgb, cv::Mat& tile_mask);
+                 int height, cv::Mat& tile_rgb, cv::Mat& tile_mask, int max_repetitions = 0);
 
 }  // namespace tessera::pattern
