@@ -104,6 +104,9 @@ void addTextureFigures(const TextureEvaluation& textures, const nlohmann::json& 
   figures["missed_matches"] = textures.missed_matches;
   figures["reuses_evaluated"] = textures.reuses;
   figures["stored_evaluated"] = textures.stored;
+  // Patterns (docs/METRICS.md, period error): instances on periodic true textures.
+  figures["patterns_evaluated"] = textures.patterns;
+  figures["patterns_exact"] = textures.patterns_exact;
   figures["ideal_pixels"] = optional(textures.ideal_pixels);
   const std::optional<double> pixels_after = pixelsAfter(report);
   figures["economy"] = textures.ideal_pixels && pixels_after && *pixels_after > 0.0
@@ -122,6 +125,7 @@ void addTextureFigures(const TextureEvaluation& textures, const nlohmann::json& 
                          {"true_texture", p.true_texture},
                          {"texture_id", optional(p.texture_id)},
                          {"reused", p.reused},
+                         {"pattern_exact", p.pattern_exact ? json(*p.pattern_exact) : json(nullptr)},
                          {"reuse_psnr_db", optional(p.reuse_psnr_db)},
                          {"reuse_registered_psnr_db", optional(p.reuse_registered_psnr_db)},
                          {"reuse_shift_texels", optional(p.reuse_shift_texels)},

@@ -18,6 +18,7 @@
 #include "tessera/drivers/synthetic/texture.h"
 #include "tessera/eval/reuse_sheet.h"
 #include "tessera/fusion/mesh_colours.h"
+#include "tessera/pattern/lattice.h"
 #include "tessera/texture/bitmap_builder.h"
 #include "tessera/texture/bitmap_export.h"
 #include "truth_geometry.h"
@@ -311,6 +312,32 @@ double idealPixels(const std::vector<PatchTextureResult>& patches,
   return sum;
 }
 
+// A pattern instance's lattice against its true texture's (METRICS.md, period error): both in
+// the patch's texels. Patch texel -> texture frame is the instance's similarity S, so a frame
+// vector v is S's linear part inverted applied to v; texel -> plane (u, v) -> texture (s, t) is
+// affine, its linear part taken from the truth at the grid's origin.
+template <typename TexelToPlane>
+void judgePattern(const nlohmann::json& instance, const TexturedPlane& plane,
+                  const TexelToPlane& texel_to_plane, PatchTextureResult& result) {
+  const auto lattice = instance.find("lattice");
+  const auto truth = plane.texture->lattice();
+  if (lattice == instance.end() || !lattice->is_array() || lattice->size() != 4 || !truth) return;
+  const auto& t = instance.at("transform");
+  const core::Similarity2 s{t.at(0).get<double>(), t.at(1).get<double>(), 0.0, 0.0};
+  const core::Similarity2 frame_to_texel = s.inverse();
+  const core::Lattice2 found{
+      frame_to_texel.apply({lattice->at(0).get<double>(), lattice->at(1).get<double>()}),
+      frame_to_texel.apply({lattice->at(2).get<double>(), lattice->at(3).get<double>()})};
+  const Eigen::Vector2d o = texel_to_plane(0.0, 0.0);
+  Eigen::Matrix2d texel_to_texture;
+  texel_to_texture << texel_to_plane(1.0, 0.0) - o, texel_to_plane(0.0, 1.0) - o;
+  texel_to_texture = Eigen::Rotation2Dd(plane.rotation_rad).toRotationMatrix() *
+                     texel_to_texture / plane.scale;
+  const Eigen::Matrix2d to_texels = texel_to_texture.inverse();
+  const core::Lattice2 true_texels{to_texels * (*truth)[0], to_texels * (*truth)[1]};
+  result.pattern_exact = pattern::sameLattice(found, true_texels, 1.0);
+}
+
 }  // namespace
 
 TextureEvaluation evaluateTextures(const nlohmann::json& truth,
@@ -399,6 +426,9 @@ TextureEvaluation evaluateTextures(const nlohmann::json& truth,
     patch_result.registered_psnr_db = std::max(placed.psnr_db, compare(rgb, render(shift)).psnr_db);
     if (const auto instance = patch.find("instance");
         instance != patch.end() && instance->is_object()) {
+      judgePattern(*instance, main_plane,
+                   [&](double col, double row) { return main_plane.plane.uvOf(truthPoint(col, row)); },
+                   patch_result);
       patch_result.texture_id = instance->at("texture_id").get<std::int64_t>();
       patch_result.reused = instance->value("reused", false);
       if (patch_result.reused) {
@@ -420,6 +450,10 @@ TextureEvaluation evaluateTextures(const nlohmann::json& truth,
         patch_result.baseline_psnr_db = from_mesh.psnr_db;
         baseline_psnrs.push_back(from_mesh.psnr_db);
       }
+    }
+    if (patch_result.pattern_exact) {
+      ++result.patterns;
+      result.patterns_exact += *patch_result.pattern_exact ? 1 : 0;
     }
     psnrs.push_back(patch_result.psnr_db);
     registered_psnrs.push_back(patch_result.registered_psnr_db);

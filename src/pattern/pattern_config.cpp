@@ -18,6 +18,7 @@ void readConfig(const core::ConfigSection& section, PatternStageConfig& config) 
   section.read("min_explained", p.min_explained);
   section.read("max_overlay_share", p.max_overlay_share);
   section.read("min_repeats", p.min_repeats);
+  section.read("finer_psnr_loss_db", p.finer_psnr_loss_db);
   section.read("repeat_error_ratio", p.lattice.repeat_error_ratio);
   section.read("overlay_sigmas", p.overlay_sigmas);
   section.read("min_overlay_error", p.min_overlay_error);
@@ -38,10 +39,11 @@ void readConfig(const core::ConfigSection& section, PatternStageConfig& config) 
   }
   if (p.min_explained < 0.0 || p.min_explained > 1.0 || p.max_overlay_share < 0.0 ||
       p.max_overlay_share >= 1.0 || p.min_repeats < 2.0 || p.min_overlay_px < 1 ||
+      p.finer_psnr_loss_db < 0.0 ||
       p.lattice.repeat_error_ratio < 1.0) {
     throw core::ConfigError(
         "pattern: min_explained must be in [0, 1], max_overlay_share in [0, 1), min_repeats "
-        ">= 2, min_overlay_px >= 1, repeat_error_ratio >= 1");
+        ">= 2, min_overlay_px >= 1, finer_psnr_loss_db >= 0, repeat_error_ratio >= 1");
   }
 }
 

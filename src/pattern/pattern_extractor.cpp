@@ -319,6 +319,38 @@ std::string unfaithfulness(const Pattern& p, double unexplained_share,
   return {};
 }
 
+// A faithful cell can be a multiple of the true one (the autocorrelation's clear peaks missed
+// the shortest vectors, as on a sensor's blurred brick wall): the cells of half its area
+// (index 2 above it) are tried, and one whose tiling stays as faithful (within
+// config.finer_psnr_loss_db) replaces it, until none does.
+core::Lattice2 finestFaithful(const Scaled& scaled, core::Lattice2 cell, double psnr_db,
+                              Periodicity periodicity, const PatternConfig& config) {
+  const bool stripes = periodicity == Periodicity::kOneDirection;
+  const double shortest = config.lattice.min_period_px;
+  for (int round = 0; round < 4; ++round) {
+    std::vector<core::Lattice2> finer{{0.5 * cell.v1, cell.v2}};
+    if (!stripes) {
+      finer.push_back(reduceBasis({cell.v1, 0.5 * cell.v2}));
+      finer.push_back(reduceBasis({0.5 * (cell.v1 + cell.v2), cell.v2}));
+    }
+    std::optional<core::Lattice2> best;
+    double best_psnr = psnr_db - config.finer_psnr_loss_db;
+    for (const core::Lattice2& candidate : finer) {
+      if (candidate.v1.norm() < shortest || (!stripes && candidate.v2.norm() < shortest)) continue;
+      double share = 0.0;
+      const Pattern trial =
+          tileAndJudge(scaled.rgb, scaled.mask, candidate, periodicity, config, share);
+      if (unfaithfulness(trial, share, config).empty() && trial.psnr_db >= best_psnr) {
+        best = candidate, best_psnr = trial.psnr_db;
+      }
+    }
+    if (!best) break;
+    cell = *best;
+    psnr_db = best_psnr;
+  }
+  return cell;
+}
+
 }  // namespace
 
 PatternAnalysis analysePattern(const cv::Mat& rgb, const cv::Mat& mask,
@@ -348,7 +380,8 @@ PatternAnalysis analysePattern(const cv::Mat& rgb, const cv::Mat& mask,
   // Stripes repeat along themselves with any period: a cell about as long as it is wide.
   if (stripes) cell.v2 = std::max(8.0 * scaled.f, cell.v1.norm()) * cell.v2;
 
-  // Candidates judged on the scaled bitmap; the first faithful one is built at full size.
+  // Candidates judged on the scaled bitmap; the first faithful one, made as fine as it stays
+  // faithful, is built at full size.
   std::optional<core::Lattice2> chosen;
   double share = 0.0;
   for (const core::Lattice2& candidate : candidateCells(cell, stripes)) {
@@ -356,7 +389,7 @@ PatternAnalysis analysePattern(const cv::Mat& rgb, const cv::Mat& mask,
         tileAndJudge(scaled.rgb, scaled.mask, candidate, estimate.periodicity, config, share);
     analysis.reason = unfaithfulness(trial, share, config);
     if (analysis.reason.empty()) {
-      chosen = candidate;
+      chosen = finestFaithful(scaled, candidate, trial.psnr_db, estimate.periodicity, config);
       break;
     }
   }

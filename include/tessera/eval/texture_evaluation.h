@@ -59,6 +59,9 @@ struct PatchTextureResult {
   std::size_t reuse_texels = 0;  // texels compared
   bool false_match = false;      // a reuse off by more than the options' bounds
   bool missed_match = false;     // stored its own though its true texture was stored before
+  // A pattern instance on a periodic true texture: whether its lattice is the true one within
+  // 1 texel (METRICS.md, period error).
+  std::optional<bool> pattern_exact;
 };
 
 struct TextureEvaluation {
@@ -71,6 +74,8 @@ struct TextureEvaluation {
   // Over the evaluated patches (docs/METRICS.md "Matching"): reuses judged, false among them;
   // patches that stored their own texture, missed among them.
   std::size_t reuses = 0, false_matches = 0, stored = 0, missed_matches = 0;
+  // Pattern instances on periodic true textures, and those with the exact lattice.
+  std::size_t patterns = 0, patterns_exact = 0;
   std::optional<double> false_match_rate;   // false_matches / reuses
   std::optional<double> missed_match_rate;  // missed / (missed + reuses that are not false)
   // Each distinct true texture of the patches once: its period cell when periodic, else the

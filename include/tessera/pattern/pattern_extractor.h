@@ -27,6 +27,8 @@ struct PatternConfig {
   double min_explained = 0.5;   // ... explains this share of the bitmap's colour variance
   double max_overlay_share = 0.35;  // ... leaves at most this share unexplained
   double min_repeats = 3.0;     // ... from at least this many cells' worth of bitmap
+  // A cell of half the area replaces a faithful one when its tiling loses at most this much.
+  double finer_psnr_loss_db = 0.5;
   // Unexplained texels: colour error above this many robust noise deviations (and at least
   // min_overlay_error grey levels), in blobs of at least min_overlay_px texels.
   double overlay_sigmas = 4.0;
