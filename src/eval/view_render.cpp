@@ -41,24 +41,35 @@ int clipNear(const std::array<Corner, 3>& in, float near, std::array<Corner, 4>&
   return n;
 }
 
+// Texel index i of an axis of n texels: clamped to the edge, or wrapped (a repeating texture).
+int texelIndex(int i, int n, bool repeat) {
+  if (!repeat) return std::clamp(i, 0, n - 1);
+  const int r = i % n;
+  return r < 0 ? r + n : r;
+}
+
 // Bilinear RGB of an RGBA texture at (s, t) over its opaque texels; false where the nearest
-// texel is transparent (an empty texel covers nothing).
-bool sampleTexture(const cv::Mat& texture, float s, float t, Eigen::Vector3f& rgb) {
+// texel is transparent (an empty texel covers nothing). A repeating texture (a pattern tile,
+// MTL's default) wraps at its edges; a clamped one (`-clamp on`) stops there.
+bool sampleTexture(const TextureImage& texture, float s, float t, Eigen::Vector3f& rgb) {
+  const cv::Mat& image = texture.rgba;
+  const bool repeat = texture.repeat;
+  if (repeat) s -= std::floor(s), t -= std::floor(t);
   // OBJ's t axis points up: the image's first row is t = 1.
-  const float x = s * static_cast<float>(texture.cols) - 0.5F;
-  const float y = (1.0F - t) * static_cast<float>(texture.rows) - 0.5F;
-  const int nx = std::clamp(static_cast<int>(std::lround(x)), 0, texture.cols - 1);
-  const int ny = std::clamp(static_cast<int>(std::lround(y)), 0, texture.rows - 1);
-  if (texture.at<cv::Vec4b>(ny, nx)[3] == 0) return false;
+  const float x = s * static_cast<float>(image.cols) - 0.5F;
+  const float y = (1.0F - t) * static_cast<float>(image.rows) - 0.5F;
+  const int nx = texelIndex(static_cast<int>(std::lround(x)), image.cols, repeat);
+  const int ny = texelIndex(static_cast<int>(std::lround(y)), image.rows, repeat);
+  if (image.at<cv::Vec4b>(ny, nx)[3] == 0) return false;
   const int x0 = static_cast<int>(std::floor(x)), y0 = static_cast<int>(std::floor(y));
   const float fx = x - static_cast<float>(x0), fy = y - static_cast<float>(y0);
   Eigen::Vector3f sum = Eigen::Vector3f::Zero();
   float total = 0.0F;
   for (int dy = 0; dy < 2; ++dy) {
     for (int dx = 0; dx < 2; ++dx) {
-      const int cx = std::clamp(x0 + dx, 0, texture.cols - 1);
-      const int cy = std::clamp(y0 + dy, 0, texture.rows - 1);
-      const cv::Vec4b& texel = texture.at<cv::Vec4b>(cy, cx);
+      const int cx = texelIndex(x0 + dx, image.cols, repeat);
+      const int cy = texelIndex(y0 + dy, image.rows, repeat);
+      const cv::Vec4b& texel = image.at<cv::Vec4b>(cy, cx);
       if (texel[3] == 0) continue;
       const float w = (dx != 0 ? fx : 1.0F - fx) * (dy != 0 ? fy : 1.0F - fy);
       sum += w * Eigen::Vector3f(texel[0], texel[1], texel[2]);
@@ -66,7 +77,7 @@ bool sampleTexture(const cv::Mat& texture, float s, float t, Eigen::Vector3f& rg
     }
   }
   if (total <= 0.0F) {
-    const cv::Vec4b& texel = texture.at<cv::Vec4b>(ny, nx);
+    const cv::Vec4b& texel = image.at<cv::Vec4b>(ny, nx);
     rgb = Eigen::Vector3f(texel[0], texel[1], texel[2]);
   } else {
     rgb = sum / total;
@@ -79,7 +90,7 @@ class Rasteriser {
   Rasteriser(const core::Intrinsics& k, ViewImage& view) : k_(k), view_(view) {}
 
   // Draws one convex polygon (a clipped triangle) as a fan.
-  void drawPolygon(const std::array<Corner, 4>& corners, int n, const cv::Mat* texture) {
+  void drawPolygon(const std::array<Corner, 4>& corners, int n, const TextureImage* texture) {
     for (int i = 1; i + 1 < n; ++i) {
       drawTriangle({corners[0], corners[static_cast<std::size_t>(i)],
                     corners[static_cast<std::size_t>(i + 1)]},
@@ -88,7 +99,7 @@ class Rasteriser {
   }
 
  private:
-  void drawTriangle(const std::array<Corner, 3>& c, const cv::Mat* texture) {
+  void drawTriangle(const std::array<Corner, 3>& c, const TextureImage* texture) {
     std::array<Eigen::Vector2f, 3> p;
     for (std::size_t i = 0; i < 3; ++i) {
       const Eigen::Vector3f& X = c[i].X_C;
@@ -187,7 +198,8 @@ RenderMesh readTexturedObj(const std::filesystem::path& path) {
     auto [it, inserted] =
         loaded.try_emplace(material.diffuse_texname, static_cast<int>(mesh.textures.size()));
     if (inserted) {
-      mesh.textures.push_back(readTextureImage(path.parent_path() / material.diffuse_texname));
+      mesh.textures.push_back({readTextureImage(path.parent_path() / material.diffuse_texname),
+                               !material.diffuse_texopt.clamp});
     }
     texture_of_material.push_back(it->second);
   }
@@ -241,7 +253,7 @@ ViewImage renderView(const RenderMesh& mesh, const core::Intrinsics& intrinsics,
   const auto near = static_cast<float>(near_m);
   std::array<Corner, 4> clipped;
   for (std::size_t f = 0; f < mesh.triangles.size(); ++f) {
-    const cv::Mat* texture = nullptr;
+    const TextureImage* texture = nullptr;
     if (mesh.textured()) {
       if (mesh.texture_of[f] < 0) continue;  // no image: the patch is not textured
       texture = &mesh.textures[static_cast<std::size_t>(mesh.texture_of[f])];

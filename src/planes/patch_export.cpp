@@ -85,14 +85,16 @@ void writeMaterials(const PatchMap& map, const TextureBindings& textures,
     if (texture == nullptr) continue;
     if (const auto& shown = texture->map_texture) {
       if (!written.insert(shown->texture_id).second) continue;
+      // A pattern tile repeats (MTL's default wrap); anything else stops at its edges.
+      const char* wrap = shown->tiled ? "" : "-clamp on ";
       out << fmt::format(
-          "newmtl {}\nKa 1 1 1\nKd 1 1 1\nKs 0 0 0\nillum 1\nmap_Kd {}\nmap_d {}\n\n",
-          materialOf(patch, *texture), shown->image, shown->image);
+          "newmtl {}\nKa 1 1 1\nKd 1 1 1\nKs 0 0 0\nillum 1\nmap_Kd {}{}\nmap_d {}{}\n\n",
+          materialOf(patch, *texture), wrap, shown->image, wrap, shown->image);
       continue;
     }
     out << fmt::format(
-        "newmtl patch_{}\nKa 1 1 1\nKd 1 1 1\nKs 0 0 0\nillum 1\nmap_Kd {}\n"
-        "map_d {}\n\n",
+        "newmtl patch_{}\nKa 1 1 1\nKd 1 1 1\nKs 0 0 0\nillum 1\nmap_Kd -clamp on {}\n"
+        "map_d -clamp on {}\n\n",
         patch.id, texture->image, texture->image);
   }
   checkWritten(out, path);

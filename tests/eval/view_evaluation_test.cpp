@@ -51,14 +51,14 @@ core::Frame captured(const core::Isometry& T_W_C, std::uint64_t index) {
 RenderMesh wallMap(double shift_x_m) {
   constexpr int kTexels = 1500;  // 3 m at 2 mm
   RenderMesh mesh;
-  mesh.textures.emplace_back(kTexels, kTexels, CV_8UC4);
+  mesh.textures.push_back({cv::Mat(kTexels, kTexels, CV_8UC4), false});  // clamped, as a bitmap
   for (int r = 0; r < kTexels; ++r) {
     for (int c = 0; c < kTexels; ++c) {
       // Texel centres; the image's first row is the top of the texture (t = 1, y = +1.5).
       const double x = -kHalfSide + (c + 0.5) * 2 * kHalfSide / kTexels;
       const double y = kHalfSide - (r + 0.5) * 2 * kHalfSide / kTexels;
       const cv::Vec3b rgb = wallColour(x, y);
-      mesh.textures[0].at<cv::Vec4b>(r, c) = {rgb[0], rgb[1], rgb[2], 255};
+      mesh.textures[0].rgba.at<cv::Vec4b>(r, c) = {rgb[0], rgb[1], rgb[2], 255};
     }
   }
   const auto corner = [&](double x, double y) {

@@ -13,6 +13,13 @@
 
 namespace tessera::eval {
 
+// An OBJ material's image: CV_8UC4 RGBA, texels with alpha 0 covering nothing; `repeat` as
+// MTL's default, off for `map_Kd -clamp on`.
+struct TextureImage {
+  cv::Mat rgba;
+  bool repeat = true;
+};
+
 // World-space triangles, either vertex-coloured or textured (one RGBA texture per triangle).
 struct RenderMesh {
   std::vector<Eigen::Vector3f> vertices;
@@ -20,7 +27,7 @@ struct RenderMesh {
   std::vector<Eigen::Vector3f> colours;  // vertex-coloured: RGB in [0, 255] per vertex
   std::vector<Eigen::Vector2f> uvs;      // textured: (s, t) per triangle corner, OBJ convention
   std::vector<int> texture_of;           // textured: per triangle, index into textures or -1
-  std::vector<cv::Mat> textures;         // CV_8UC4 RGBA; texels with alpha 0 cover nothing
+  std::vector<TextureImage> textures;
   bool textured() const { return !texture_of.empty(); }
 };
 
