@@ -98,7 +98,8 @@ void expectTexturedPatches(const fs::path& out, const RunSummary& summary) {
   // The map shows the database's textures.
   EXPECT_NE(obj_text.find("usemtl texture_"), std::string::npos);
   EXPECT_NE(obj_text.find("\nvt "), std::string::npos);
-  EXPECT_NE(mtl_text.find("map_Kd textures/texture_"), std::string::npos);
+  // A single texture stops at its edges (a pattern tile would repeat: MTL's default).
+  EXPECT_NE(mtl_text.find("map_Kd -clamp on textures/texture_"), std::string::npos);
 }
 
 TEST(Pipeline, RunsEveryGoodFrameAndWritesTheOutputs) {
