@@ -37,8 +37,8 @@ constexpr double kPi = 3.14159265358979323846;
 
 struct Case {
   std::string name;
-  cv::Mat tile;      // RGB, one exact period of `truth` at least
-  Lattice2 truth;    // texels
+  cv::Mat tile;    // RGB, one exact period of `truth` at least
+  Lattice2 truth;  // texels
   bool seamless = true;
 };
 
@@ -101,9 +101,9 @@ cv::Mat sampleTexture(const tessera::drivers::synthetic::Texture& texture, doubl
   for (int row = 0; row < height; ++row) {
     for (int col = 0; col < width; ++col) {
       const cv::Vec3f c = texture.colour((col + 0.5) * texel_m, (row + 0.5) * texel_m);
-      rgb.at<cv::Vec3b>(row, col) = cv::Vec3b(cv::saturate_cast<uchar>(c[0]),
-                                              cv::saturate_cast<uchar>(c[1]),
-                                              cv::saturate_cast<uchar>(c[2]));
+      rgb.at<cv::Vec3b>(row, col) =
+          cv::Vec3b(cv::saturate_cast<uchar>(c[0]), cv::saturate_cast<uchar>(c[1]),
+                    cv::saturate_cast<uchar>(c[2]));
     }
   }
   return rgb;
@@ -123,8 +123,8 @@ cv::Mat viewTiled(const cv::Mat& tile, const cv::Matx22d& A, int width, int heig
   for (int r = 0; r < 2; ++r) {
     map.at<double>(r, 0) = inverse(r, 0);
     map.at<double>(r, 1) = inverse(r, 1);
-    map.at<double>(r, 2) = (r == 0 ? centre_in.x : centre_in.y) -
-                           inverse(r, 0) * centre_out.x - inverse(r, 1) * centre_out.y;
+    map.at<double>(r, 2) = (r == 0 ? centre_in.x : centre_in.y) - inverse(r, 0) * centre_out.x -
+                           inverse(r, 1) * centre_out.y;
   }
   cv::Mat out;
   cv::warpAffine(big, out, map, {width, height}, cv::INTER_LINEAR | cv::WARP_INVERSE_MAP,
@@ -158,8 +158,9 @@ std::vector<Variant> variantsOf(const Case& c, const cv::Mat& occluder, std::mt1
   out.push_back({"turned", viewTiled(c.tile, R, width, height), transformed(c.truth, R)});
   const double s = scale(random);
   const cv::Matx22d S(s, 0, 0, s);
-  out.push_back({"scaled", viewTiled(c.tile, S, static_cast<int>(std::round(width * s)),
-                                     static_cast<int>(std::round(height * s))),
+  out.push_back({"scaled",
+                 viewTiled(c.tile, S, static_cast<int>(std::round(width * s)),
+                           static_cast<int>(std::round(height * s))),
                  transformed(c.truth, S)});
 
   cv::Mat noisy;
@@ -253,8 +254,7 @@ int main(int argc, char** argv) {
     if (!lattice) continue;
     Case c;
     c.name = "office/" + id;
-    c.truth = tessera::pattern::reduceBasis(
-        {(*lattice)[0] / texel_m, (*lattice)[1] / texel_m});
+    c.truth = tessera::pattern::reduceBasis({(*lattice)[0] / texel_m, (*lattice)[1] / texel_m});
     // One tile of the 4 x 4: the bounding box of a rectangular super-cell, sampled.
     const double w = std::abs(c.truth.v1.x()) + std::abs(c.truth.v2.x());
     const double h = std::abs(c.truth.v1.y()) + std::abs(c.truth.v2.y());
@@ -312,8 +312,8 @@ int main(int argc, char** argv) {
     stochastic.emplace_back("office/" + id, sampleTexture(*texture, texel, w, h));
   }
   for (const Case& c : cases) {
-    const bool tile_sized = c.truth.v1.norm() >= c.tile.cols - 0.5 &&
-                            std::abs(c.truth.v2.norm() - c.tile.rows) < 0.5;
+    const bool tile_sized =
+        c.truth.v1.norm() >= c.tile.cols - 0.5 && std::abs(c.truth.v2.norm() - c.tile.rows) < 0.5;
     if (tile_sized && c.tile.cols >= 96 && c.tile.rows >= 96 && c.name.rfind("office/", 0) != 0) {
       stochastic.emplace_back(c.name + " (one tile)", c.tile);
     }
@@ -348,8 +348,9 @@ int main(int argc, char** argv) {
                tally.second, 100.0 * tally.first / std::max(1, tally.second), other.first,
                other.second, 100.0 * other.first / std::max(1, other.second));
   }
-  fmt::print("non-periodic images called periodic: {}/{} ({:.1f} %)\n", called_periodic,
-             stochastic.size(), 100.0 * called_periodic / static_cast<double>(std::max<std::size_t>(1, stochastic.size())));
+  fmt::print(
+      "non-periodic images called periodic: {}/{} ({:.1f} %)\n", called_periodic, stochastic.size(),
+      100.0 * called_periodic / static_cast<double>(std::max<std::size_t>(1, stochastic.size())));
   fmt::print("512 x 512 bitmap: {:.1f} ms median, {:.1f} ms p95 ({} analyses)\n", median(ms),
              quantile(ms, 0.95), ms.size());
   return 0;

@@ -84,18 +84,20 @@ int patternCommand(const PatternArguments& args) {
       if (found->periodicity == pattern::Periodicity::kTwoDirections) {
         fmt::print("  v2 ({:.2f}, {:.2f})", found->lattice.v2.x(), found->lattice.v2.y());
       }
-      fmt::print("\n  tile {}x{}, {:.1f} repeats, tiling PSNR {:.1f} dB, explains {:.0f} % of "
-                 "the variance, {} overlay(s)\n",
-                 found->tile_rgb.cols, found->tile_rgb.rows, found->repeats, found->psnr_db,
-                 100.0 * found->explained, found->overlays.size());
+      fmt::print(
+          "\n  tile {}x{}, {:.1f} repeats, tiling PSNR {:.1f} dB, explains {:.0f} % of "
+          "the variance, {} overlay(s)\n",
+          found->tile_rgb.cols, found->tile_rgb.rows, found->repeats, found->psnr_db,
+          100.0 * found->explained, found->overlays.size());
     } else {
       fmt::print("{}: none ({})\n", args.image, analysis.reason);
       const pattern::LatticeEstimate& e = analysis.estimate;
       if (e.periodicity != pattern::Periodicity::kNone) {
-        fmt::print("  the autocorrelation proposed {} v1 ({:.2f}, {:.2f}) v2 ({:.2f}, {:.2f}), "
-                   "peak {:.2f}\n",
-                   pattern::periodicityName(e.periodicity), e.lattice.v1.x(), e.lattice.v1.y(),
-                   e.lattice.v2.x(), e.lattice.v2.y(), e.score);
+        fmt::print(
+            "  the autocorrelation proposed {} v1 ({:.2f}, {:.2f}) v2 ({:.2f}, {:.2f}), "
+            "peak {:.2f}\n",
+            pattern::periodicityName(e.periodicity), e.lattice.v1.x(), e.lattice.v1.y(),
+            e.lattice.v2.x(), e.lattice.v2.y(), e.score);
       }
     }
     if (!args.out.empty()) {

@@ -114,24 +114,25 @@ void addTextureFigures(const TextureEvaluation& textures, const nlohmann::json& 
                            : json(nullptr);
   json per_patch = json::array();
   for (const PatchTextureResult& p : textures.patches) {
-    per_patch.push_back({{"patch", p.patch_id},
-                         {"plane", p.plane},
-                         {"texels", p.texels},
-                         {"psnr_db", p.psnr_db},
-                         {"registered_psnr_db", p.registered_psnr_db},
-                         {"shift_m", p.shift_m},
-                         {"tsdf_baseline_psnr_db", optional(p.baseline_psnr_db)},
-                         {"observed_texels", p.observed_texels},
-                         {"true_texture", p.true_texture},
-                         {"texture_id", optional(p.texture_id)},
-                         {"reused", p.reused},
-                         {"pattern_exact", p.pattern_exact ? json(*p.pattern_exact) : json(nullptr)},
-                         {"reuse_psnr_db", optional(p.reuse_psnr_db)},
-                         {"reuse_registered_psnr_db", optional(p.reuse_registered_psnr_db)},
-                         {"reuse_shift_texels", optional(p.reuse_shift_texels)},
-                         {"reuse_texels", p.reuse_texels},
-                         {"false_match", p.false_match},
-                         {"missed_match", p.missed_match}});
+    per_patch.push_back(
+        {{"patch", p.patch_id},
+         {"plane", p.plane},
+         {"texels", p.texels},
+         {"psnr_db", p.psnr_db},
+         {"registered_psnr_db", p.registered_psnr_db},
+         {"shift_m", p.shift_m},
+         {"tsdf_baseline_psnr_db", optional(p.baseline_psnr_db)},
+         {"observed_texels", p.observed_texels},
+         {"true_texture", p.true_texture},
+         {"texture_id", optional(p.texture_id)},
+         {"reused", p.reused},
+         {"pattern_exact", p.pattern_exact ? json(*p.pattern_exact) : json(nullptr)},
+         {"reuse_psnr_db", optional(p.reuse_psnr_db)},
+         {"reuse_registered_psnr_db", optional(p.reuse_registered_psnr_db)},
+         {"reuse_shift_texels", optional(p.reuse_shift_texels)},
+         {"reuse_texels", p.reuse_texels},
+         {"false_match", p.false_match},
+         {"missed_match", p.missed_match}});
   }
   figures["textures"] = per_patch;
 }

@@ -331,8 +331,8 @@ void judgePattern(const nlohmann::json& instance, const TexturedPlane& plane,
   const Eigen::Vector2d o = texel_to_plane(0.0, 0.0);
   Eigen::Matrix2d texel_to_texture;
   texel_to_texture << texel_to_plane(1.0, 0.0) - o, texel_to_plane(0.0, 1.0) - o;
-  texel_to_texture = Eigen::Rotation2Dd(plane.rotation_rad).toRotationMatrix() *
-                     texel_to_texture / plane.scale;
+  texel_to_texture =
+      Eigen::Rotation2Dd(plane.rotation_rad).toRotationMatrix() * texel_to_texture / plane.scale;
   const Eigen::Matrix2d to_texels = texel_to_texture.inverse();
   const core::Lattice2 true_texels{to_texels * (*truth)[0], to_texels * (*truth)[1]};
   result.pattern_exact = pattern::sameLattice(found, true_texels, 1.0);
@@ -426,9 +426,10 @@ TextureEvaluation evaluateTextures(const nlohmann::json& truth,
     patch_result.registered_psnr_db = std::max(placed.psnr_db, compare(rgb, render(shift)).psnr_db);
     if (const auto instance = patch.find("instance");
         instance != patch.end() && instance->is_object()) {
-      judgePattern(*instance, main_plane,
-                   [&](double col, double row) { return main_plane.plane.uvOf(truthPoint(col, row)); },
-                   patch_result);
+      judgePattern(
+          *instance, main_plane,
+          [&](double col, double row) { return main_plane.plane.uvOf(truthPoint(col, row)); },
+          patch_result);
       patch_result.texture_id = instance->at("texture_id").get<std::int64_t>();
       patch_result.reused = instance->value("reused", false);
       if (patch_result.reused) {

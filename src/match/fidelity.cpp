@@ -29,7 +29,6 @@ int nearestTexel(double x, int size, bool tiled) {
   return texel >= size ? texel - size : texel;  // x was wrapped into [0, size)
 }
 
-
 void checkTexture(const cv::Mat& texture, const cv::Mat& texture_mask, int width, int height) {
   if (texture.empty() || texture.type() != CV_8UC3) {
     throw core::Error("renderThrough: the texture must be a non-empty CV_8UC3");

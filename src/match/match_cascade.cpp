@@ -63,8 +63,8 @@ std::shared_ptr<StoredTexture> patternTexture(std::int64_t id, const cv::Mat& ti
   stored->pattern = true;
   stored->lattice = lattice;
   stored->tile_rgb = tile_rgb;
-  stored->tile_mask = tile_mask.empty() ? cv::Mat(tile_rgb.size(), CV_8UC1, cv::Scalar(255))
-                                        : tile_mask;
+  stored->tile_mask =
+      tile_mask.empty() ? cv::Mat(tile_rgb.size(), CV_8UC1, cv::Scalar(255)) : tile_mask;
   // The cell's bounding box in the frame: the template NCC looks for in a new bitmap (any
   // placement of it is the pattern at some phase).
   const Eigen::Vector2d corners[] = {Eigen::Vector2d::Zero(), lattice.v1, lattice.v2,
@@ -78,8 +78,8 @@ std::shared_ptr<StoredTexture> patternTexture(std::int64_t id, const cv::Mat& ti
                          std::max(1, static_cast<int>(std::ceil(width))),
                          std::max(1, static_cast<int>(std::ceil(height))));
   };
-  const Rendered cell = swatch(high.x() - stored->swatch_origin.x(),
-                               high.y() - stored->swatch_origin.y());
+  const Rendered cell =
+      swatch(high.x() - stored->swatch_origin.x(), high.y() - stored->swatch_origin.y());
   stored->description.rgb = cell.rgb;
   stored->description.mask = cell.covered;
   // Colour coherence judged on a swatch of several cells, as a wall's bitmap shows them.
@@ -92,8 +92,8 @@ std::shared_ptr<StoredTexture> patternTexture(std::int64_t id, const cv::Mat& ti
 Rendered renderStored(const StoredTexture& stored, const core::Similarity2& patch_to_texture,
                       int width, int height) {
   if (stored.pattern) {
-    return renderPattern(stored.tile_rgb, stored.tile_mask, stored.lattice, patch_to_texture,
-                         width, height);
+    return renderPattern(stored.tile_rgb, stored.tile_mask, stored.lattice, patch_to_texture, width,
+                         height);
   }
   return renderThrough(stored.description.rgb, stored.description.mask, patch_to_texture, width,
                        height, false);

@@ -33,7 +33,8 @@ double parabolicRise(double a, double b, double c) {
 std::optional<Peak> peakNear(const Autocorrelation& acf, const Eigen::Vector2d& near, int window) {
   std::optional<Peak> best;
   int bx = 0, by = 0;
-  const int cx = static_cast<int>(std::lround(near.x())), cy = static_cast<int>(std::lround(near.y()));
+  const int cx = static_cast<int>(std::lround(near.x())),
+            cy = static_cast<int>(std::lround(near.y()));
   for (int dy = cy - window; dy <= cy + window; ++dy) {
     for (int dx = cx - window; dx <= cx + window; ++dx) {
       if (!acf.contains(dx, dy)) continue;
@@ -102,7 +103,8 @@ Eigen::Vector2d refineByMultiples(const Autocorrelation& acf, const Eigen::Vecto
 double latticeScore(const Autocorrelation& acf, const core::Lattice2& l) {
   double sum = 0.0;
   int count = 0;
-  for (const Eigen::Vector2d& d : {l.v1, l.v2, Eigen::Vector2d(l.v1 + l.v2), Eigen::Vector2d(l.v1 - l.v2)}) {
+  for (const Eigen::Vector2d& d :
+       {l.v1, l.v2, Eigen::Vector2d(l.v1 + l.v2), Eigen::Vector2d(l.v1 - l.v2)}) {
     if (std::abs(d.x()) + 1 > acf.radius_x || std::abs(d.y()) + 1 > acf.radius_y) continue;
     const auto peak = peakNear(acf, d, 1);
     if (!peak || peak->rho <= -1.0) continue;
@@ -113,7 +115,8 @@ double latticeScore(const Autocorrelation& acf, const core::Lattice2& l) {
 }
 
 // The least rho along direction u over shifts min_t .. max_t.
-double leastAlong(const Autocorrelation& acf, const Eigen::Vector2d& u, double min_t, double max_t) {
+double leastAlong(const Autocorrelation& acf, const Eigen::Vector2d& u, double min_t,
+                  double max_t) {
   double least = 1.0;
   for (double t = min_t; t <= max_t; t += 1.0) {
     least = std::min(least, acf.sample(t * u.x(), t * u.y()));
@@ -125,8 +128,8 @@ double leastAlong(const Autocorrelation& acf, const Eigen::Vector2d& u, double m
 // does across. Returns the unit vector along the stripes.
 std::optional<Eigen::Vector2d> stripeDirection(const Autocorrelation& acf,
                                                const LatticeConfig& config) {
-  const double reach = std::max(config.min_period_px + 2.0,
-                                0.5 * std::min(acf.radius_x, acf.radius_y));
+  const double reach =
+      std::max(config.min_period_px + 2.0, 0.5 * std::min(acf.radius_x, acf.radius_y));
   double best_rho = -1.0, best_angle = 0.0;
   for (double angle = 0.0; angle < 180.0; angle += 2.0) {
     const double a = angle * kPi / 180.0;
@@ -164,8 +167,9 @@ std::optional<Peak> periodAcross(const Autocorrelation& acf, const Eigen::Vector
   const double floor = std::max(config.min_peak, highest - config.peak_drop);
   for (std::size_t i = std::max<std::size_t>(first, 1); i + 1 < profile.size(); ++i) {
     if (profile[i] >= floor && profile[i] >= profile[i - 1] && profile[i] >= profile[i + 1]) {
-      const double t = (static_cast<double>(i) +
-                        parabolicOffset(profile[i - 1], profile[i], profile[i + 1])) * step;
+      const double t =
+          (static_cast<double>(i) + parabolicOffset(profile[i - 1], profile[i], profile[i + 1])) *
+          step;
       return Peak{t * across, profile[i]};
     }
   }
@@ -190,9 +194,12 @@ double cross(const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
 
 const char* periodicityName(Periodicity p) {
   switch (p) {
-    case Periodicity::kTwoDirections: return "periodic2";
-    case Periodicity::kOneDirection: return "periodic1";
-    case Periodicity::kNone: break;
+    case Periodicity::kTwoDirections:
+      return "periodic2";
+    case Periodicity::kOneDirection:
+      return "periodic1";
+    case Periodicity::kNone:
+      break;
   }
   return "none";
 }
@@ -250,14 +257,15 @@ LatticeEstimate estimateLattice(const Autocorrelation& acf, const LatticeConfig&
     if (period && repeat_error) {
       const auto e_across = repeat_error(period->d);
       const auto e_along = repeat_error(std::max(8.0, period->d.norm()) * *along);
-      repeats_along = e_across && e_along &&
-                      repeatsAsWell(*e_along, *e_across, config.repeat_error_ratio);
+      repeats_along =
+          e_across && e_along && repeatsAsWell(*e_along, *e_across, config.repeat_error_ratio);
     }
     if (period && repeats_along) {
       estimate.periodicity = Periodicity::kOneDirection;
       const double t = refineByMultiples(acf, period->d).dot(across);
       estimate.lattice = {t * across, *along};
-      if (estimate.lattice.v1.x() < 0.0 || (estimate.lattice.v1.x() == 0 && estimate.lattice.v1.y() < 0))
+      if (estimate.lattice.v1.x() < 0.0 ||
+          (estimate.lattice.v1.x() == 0 && estimate.lattice.v1.y() < 0))
         estimate.lattice.v1 = -estimate.lattice.v1;
       estimate.score = period->rho;
       return estimate;
@@ -304,8 +312,8 @@ LatticeEstimate estimateLattice(const Autocorrelation& acf, const LatticeConfig&
     std::erase_if(peaks, [](const Peak& p) { return p.rho < 0.0; });
     if (peaks.empty()) return estimate;
   }
-  const auto first = std::find_if(peaks.begin(), peaks.end(),
-                                  [floor](const Peak& p) { return p.rho >= floor; });
+  const auto first =
+      std::find_if(peaks.begin(), peaks.end(), [floor](const Peak& p) { return p.rho >= floor; });
   if (first == peaks.end()) return estimate;
   // The second vector: the shortest clear peak in another direction, else any peak there
   // (an occluder or a gradient can weaken one direction more than the other).

@@ -72,7 +72,8 @@ core::Lattice2 refineLattice(const cv::Mat& rgb, const cv::Mat& mask, core::Latt
   rgb.convertTo(smooth, CV_32FC3);
   cv::GaussianBlur(smooth, smooth, cv::Size(), 1.0);
   // About 20,000 pairs per cost, whatever the bitmap's size.
-  const int stride = std::max(1, static_cast<int>(std::sqrt(static_cast<double>(rgb.total()) / 2e4)));
+  const int stride =
+      std::max(1, static_cast<int>(std::sqrt(static_cast<double>(rgb.total()) / 2e4)));
   for (int i = 0; i < vectors; ++i) {
     Eigen::Vector2d& v = i == 0 ? lattice.v1 : lattice.v2;
     for (int k = 2; k <= 8; k *= 2) {

@@ -31,7 +31,8 @@ void readConfig(const core::ConfigSection& section, PatternStageConfig& config) 
   if (p.lattice.min_peak <= 0.0 || p.lattice.min_peak >= 1.0 || p.lattice.peak_drop < 0.0 ||
       p.blur_sigma_px < 0.0 || p.lattice.stripe_rho <= 0.0 || p.lattice.stripe_rho > 1.0) {
     throw core::ConfigError(
-        "pattern: min_peak must be in (0, 1), peak_drop and blur_sigma_px >= 0, stripe_rho in (0, 1]");
+        "pattern: min_peak must be in (0, 1), peak_drop and blur_sigma_px >= 0, stripe_rho in (0, "
+        "1]");
   }
   if (p.lattice.min_period_px < 1.0 || p.lattice.min_angle_deg <= 0.0 ||
       p.lattice.min_angle_deg > 60.0) {
@@ -39,8 +40,7 @@ void readConfig(const core::ConfigSection& section, PatternStageConfig& config) 
   }
   if (p.min_explained < 0.0 || p.min_explained > 1.0 || p.max_overlay_share < 0.0 ||
       p.max_overlay_share >= 1.0 || p.min_repeats < 2.0 || p.min_overlay_px < 1 ||
-      p.finer_psnr_loss_db < 0.0 ||
-      p.lattice.repeat_error_ratio < 1.0) {
+      p.finer_psnr_loss_db < 0.0 || p.lattice.repeat_error_ratio < 1.0) {
     throw core::ConfigError(
         "pattern: min_explained must be in [0, 1], max_overlay_share in [0, 1), min_repeats "
         ">= 2, min_overlay_px >= 1, finer_psnr_loss_db >= 0, repeat_error_ratio >= 1");

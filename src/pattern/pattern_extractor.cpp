@@ -10,8 +10,8 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
 
-#include "tessera/core/error.h"
 #include "lattice_refinement.h"
+#include "tessera/core/error.h"
 #include "tiling.h"
 
 namespace tessera::pattern {
@@ -116,7 +116,8 @@ Faithfulness judgeTiling(const cv::Mat& rgb, const TilingError& tiling,
 // width w, whose variance is 3 (w^2 - 1) / 12 (central limit; Wells 1986): each box costs the
 // same whatever its width, where a direct Gaussian of the wide sigma here would dominate.
 cv::Mat wideBlur(const cv::Mat& image, double sigma) {
-  const int half = std::max(1, static_cast<int>(std::lround(0.5 * (std::sqrt(4.0 * sigma * sigma + 1.0) - 1.0))));
+  const int half = std::max(
+      1, static_cast<int>(std::lround(0.5 * (std::sqrt(4.0 * sigma * sigma + 1.0) - 1.0))));
   const cv::Size box(2 * half + 1, 2 * half + 1);
   cv::Mat out;
   cv::blur(image, out, box);
@@ -256,8 +257,7 @@ LatticeEstimate estimateOn(const Scaled& scaled, const PatternConfig& config) {
   if (config.blur_sigma_px > 0.0) {
     cv::GaussianBlur(grey, grey, cv::Size(), config.blur_sigma_px);
   }
-  grey = locallyNormalised(grey, scaled.mask,
-                           std::max(8.0, std::max(grey.cols, grey.rows) / 8.0));
+  grey = locallyNormalised(grey, scaled.mask, std::max(8.0, std::max(grey.cols, grey.rows) / 8.0));
   // Colours compared blurred a little, so that a shift between texels (whose bilinear
   // samples are smoother than the texels) is not judged worse than a whole-texel one.
   cv::Mat smooth_rgb;
@@ -364,8 +364,8 @@ PatternAnalysis analysePattern(const cv::Mat& rgb, const cv::Mat& mask,
   }
   PatternAnalysis analysis;
   const auto finish = [&]() {
-    analysis.ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
-                      .count();
+    analysis.ms =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
     return analysis;
   };
   const Scaled scaled = scaledForAnalysis(rgb, mask, config);

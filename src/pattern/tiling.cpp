@@ -39,19 +39,27 @@ void averageTile(const cv::Mat& rgb, const cv::Mat& mask, const core::Lattice2& 
     low = low.cwiseMin(c);
     high = high.cwiseMax(c);
   }
-  const int n0 = static_cast<int>(std::floor(low.x())) - 1, n1 = static_cast<int>(std::ceil(high.x()));
-  const int m0 = static_cast<int>(std::floor(low.y())) - 1, m1 = static_cast<int>(std::ceil(high.y()));
+  const int n0 = static_cast<int>(std::floor(low.x())) - 1,
+            n1 = static_cast<int>(std::ceil(high.x()));
+  const int m0 = static_cast<int>(std::floor(low.y())) - 1,
+            m1 = static_cast<int>(std::ceil(high.y()));
   // Cells whose bounding box meets the bitmap, those wholly inside apart.
-  const Eigen::Vector2d box_low = Eigen::Vector2d::Zero().cwiseMin(lattice.v1).cwiseMin(lattice.v2).cwiseMin(lattice.v1 + lattice.v2);
-  const Eigen::Vector2d box_high = Eigen::Vector2d::Zero().cwiseMax(lattice.v1).cwiseMax(lattice.v2).cwiseMax(lattice.v1 + lattice.v2);
+  const Eigen::Vector2d box_low = Eigen::Vector2d::Zero()
+                                      .cwiseMin(lattice.v1)
+                                      .cwiseMin(lattice.v2)
+                                      .cwiseMin(lattice.v1 + lattice.v2);
+  const Eigen::Vector2d box_high = Eigen::Vector2d::Zero()
+                                       .cwiseMax(lattice.v1)
+                                       .cwiseMax(lattice.v2)
+                                       .cwiseMax(lattice.v1 + lattice.v2);
   std::vector<Eigen::Vector2d> whole, partial;
   for (int m = m0; m <= m1; ++m) {
     for (int n = n0; n <= n1; ++n) {
       const Eigen::Vector2d o = n * lattice.v1 + m * lattice.v2;
       const Eigen::Vector2d lo = o + box_low, hi = o + box_high;
       if (hi.x() < 0.0 || hi.y() < 0.0 || lo.x() > rgb.cols || lo.y() > rgb.rows) continue;
-      const bool inside = lo.x() >= 0.0 && lo.y() >= 0.0 && hi.x() <= rgb.cols - 1 &&
-                          hi.y() <= rgb.rows - 1;
+      const bool inside =
+          lo.x() >= 0.0 && lo.y() >= 0.0 && hi.x() <= rgb.cols - 1 && hi.y() <= rgb.rows - 1;
       (inside ? whole : partial).push_back(o);
     }
   }
@@ -60,7 +68,8 @@ void averageTile(const cv::Mat& rgb, const cv::Mat& mask, const core::Lattice2& 
   const auto spread = [](const std::vector<Eigen::Vector2d>& from, std::size_t count,
                          std::vector<Eigen::Vector2d>& to) {
     count = std::min(count, from.size());
-    const double step = count > 0 ? static_cast<double>(from.size()) / static_cast<double>(count) : 0.0;
+    const double step =
+        count > 0 ? static_cast<double>(from.size()) / static_cast<double>(count) : 0.0;
     for (std::size_t k = 0; k < count; ++k) {
       to.push_back(from[static_cast<std::size_t>((static_cast<double>(k) + 0.5) * step)]);
     }
@@ -83,8 +92,8 @@ void averageTile(const cv::Mat& rgb, const cv::Mat& mask, const core::Lattice2& 
       base_y.at<float>(j, i) = static_cast<float>(q.y());
     }
   }
-  const cv::Mat validity = mask.empty() ? cv::Mat(rgb.size(), CV_8UC1, cv::Scalar(255))
-                                        : cv::Mat(mask != 0);
+  const cv::Mat validity =
+      mask.empty() ? cv::Mat(rgb.size(), CV_8UC1, cv::Scalar(255)) : cv::Mat(mask != 0);
   const std::size_t texels = static_cast<std::size_t>(width) * static_cast<std::size_t>(height);
   const std::size_t cells = origins.size();
   std::vector<std::uint8_t> colours(cells * texels * 3), valid(cells * texels);
@@ -184,7 +193,8 @@ TilingError tilingError(const cv::Mat& rgb, const cv::Mat& mask, const cv::Mat& 
     for (int col = 0; col < rgb.cols;
          ++col, u = wrapNear(u + du_col, tw), v = wrapNear(v + dv_col, th)) {
       if (inside != nullptr && inside[col] == 0) continue;
-      const int x0 = std::min(static_cast<int>(u), tw - 1), y0 = std::min(static_cast<int>(v), th - 1);
+      const int x0 = std::min(static_cast<int>(u), tw - 1),
+                y0 = std::min(static_cast<int>(v), th - 1);
       const int x1 = x0 + 1 == tw ? 0 : x0 + 1, y1 = y0 + 1 == th ? 0 : y0 + 1;
       const auto fx = static_cast<float>(u - x0), fy = static_cast<float>(v - y0);
       std::array<float, 4> w{(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy};

@@ -29,8 +29,8 @@ std::shared_ptr<const match::StoredTexture> storedTextureOf(const db::TextureRec
                                                             const match::MatchConfig& config) {
   if (record.kind == db::TextureKind::kPattern) {
     // Without a lattice (never written so), the image is one period in each direction.
-    const core::Lattice2 cell = record.lattice.value_or(
-        core::Lattice2{{record.rgb.cols, 0.0}, {0.0, record.rgb.rows}});
+    const core::Lattice2 cell =
+        record.lattice.value_or(core::Lattice2{{record.rgb.cols, 0.0}, {0.0, record.rgb.rows}});
     return match::patternTexture(record.id, record.rgb, record.mask, cell, config);
   }
   auto stored = std::make_shared<match::StoredTexture>();
@@ -138,20 +138,21 @@ void MatchStage::findPattern(MatchedPatch& matched) const {
     // Stored only if the tiling shows the patch as faithfully as a reuse must, over all its
     // texels: a wall with a poster the pattern does not explain keeps its own bitmap.
     const pattern::Pattern& found = *analysis.pattern;
-    const match::Fidelity fidelity = match::measureFidelity(
-        bitmap.rgb, bitmap.mask,
-        match::renderPattern(found.tile_rgb, found.tile_mask, found.lattice, {}, bitmap.rgb.cols,
-                             bitmap.rgb.rows));
+    const match::Fidelity fidelity =
+        match::measureFidelity(bitmap.rgb, bitmap.mask,
+                               match::renderPattern(found.tile_rgb, found.tile_mask, found.lattice,
+                                                    {}, bitmap.rgb.cols, bitmap.rgb.rows));
     const match::MatchConfig& limits = cascade_.config();
     if (fidelity.psnr_db >= limits.min_psnr_db && fidelity.coverage >= limits.min_coverage) {
       matched.pattern = std::move(analysis.pattern);
       matched.pattern_fidelity = fidelity;
     } else {
-      spdlog::debug("patch {} version {}: a {}x{} pattern tile shows it at {:.1f} dB over {:.0f} % "
-                    "of it, short of a reuse's {:.1f} dB over {:.0f} %: stored whole",
-                    matched.bitmap->id, matched.bitmap->version, found.tile_rgb.cols,
-                    found.tile_rgb.rows, fidelity.psnr_db, 100.0 * fidelity.coverage,
-                    limits.min_psnr_db, 100.0 * limits.min_coverage);
+      spdlog::debug(
+          "patch {} version {}: a {}x{} pattern tile shows it at {:.1f} dB over {:.0f} % "
+          "of it, short of a reuse's {:.1f} dB over {:.0f} %: stored whole",
+          matched.bitmap->id, matched.bitmap->version, found.tile_rgb.cols, found.tile_rgb.rows,
+          fidelity.psnr_db, 100.0 * fidelity.coverage, limits.min_psnr_db,
+          100.0 * limits.min_coverage);
     }
   } catch (const std::exception& e) {  // the bitmap is then stored as it is
     spdlog::warn("patch {} version {}: no pattern analysis: {}", matched.bitmap->id,

@@ -194,19 +194,18 @@ void writePatchesJson(const PatchMap& map, const std::filesystem::path& path,
         texture != nullptr && texture->map_texture) {
       const MapTexture& shown = *texture->map_texture;
       const core::Similarity2& s = shown.transform;
-      instance_json = {{"texture_id", shown.texture_id},
-                       {"image", shown.image},
-                       {"width", shown.width},
-                       {"height", shown.height},
-                       {"transform", {s.a, s.b, s.tx, s.ty}},
-                       {"tiled", shown.tiled},
-                       {"lattice", shown.lattice ? nlohmann::json{shown.lattice->v1.x(),
-                                                                  shown.lattice->v1.y(),
-                                                                  shown.lattice->v2.x(),
-                                                                  shown.lattice->v2.y()}
-                                                 : nlohmann::json(nullptr)},
-                       {"reused", shown.reused},
-                       {"psnr_db", shown.psnr_db ? nlohmann::json(*shown.psnr_db) : nullptr}};
+      instance_json = {
+          {"texture_id", shown.texture_id},
+          {"image", shown.image},
+          {"width", shown.width},
+          {"height", shown.height},
+          {"transform", {s.a, s.b, s.tx, s.ty}},
+          {"tiled", shown.tiled},
+          {"lattice", shown.lattice ? nlohmann::json{shown.lattice->v1.x(), shown.lattice->v1.y(),
+                                                     shown.lattice->v2.x(), shown.lattice->v2.y()}
+                                    : nlohmann::json(nullptr)},
+          {"reused", shown.reused},
+          {"psnr_db", shown.psnr_db ? nlohmann::json(*shown.psnr_db) : nullptr}};
     }
     patches.push_back({{"id", patch.id},
                        {"version", patch.version},

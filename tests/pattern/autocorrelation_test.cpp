@@ -38,7 +38,7 @@ TEST(Autocorrelation, MatchesTheNonCircularDirectSumUnderAMask) {
   rng.fill(grey, cv::RNG::UNIFORM, 0.0, 255.0);
   cv::Mat mask(grey.size(), CV_8UC1, cv::Scalar(255));
   cv::circle(mask, {8, 16}, 6, cv::Scalar(0), cv::FILLED);  // a hole
-  mask(cv::Rect(25, 0, 6, 10)).setTo(0);                      // and a cut corner
+  mask(cv::Rect(25, 0, 6, 10)).setTo(0);                    // and a cut corner
   const Autocorrelation acf = autocorrelate(grey, mask, 0.2);
   EXPECT_NEAR(acf.at(0, 0), 1.0, 1e-4);
   int compared = 0;

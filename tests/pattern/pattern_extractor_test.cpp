@@ -43,9 +43,9 @@ TEST(Lattice, ReducedBasisIsShortestAndSame) {
 TEST(PatternExtractor, FindsShearedAndTurnedLattices) {
   const cv::Mat tile = randomTile(24, 16, 3);
   const core::Lattice2 lattices[] = {
-      {{24.0, 0.0}, {0.0, 16.0}},                                  // rectangular
-      {{24.0, 0.0}, {9.0, 16.0}},                                  // sheared
-      {{21.0 * std::cos(0.4), 21.0 * std::sin(0.4)},               // turned by 23 degrees,
+      {{24.0, 0.0}, {0.0, 16.0}},                     // rectangular
+      {{24.0, 0.0}, {9.0, 16.0}},                     // sheared
+      {{21.0 * std::cos(0.4), 21.0 * std::sin(0.4)},  // turned by 23 degrees,
        {-18.0 * std::sin(0.4) + 5.0 * std::cos(0.4), 18.0 * std::cos(0.4) + 5.0 * std::sin(0.4)}},
   };
   for (const core::Lattice2& truth : lattices) {

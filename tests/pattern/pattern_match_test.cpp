@@ -46,8 +46,8 @@ TEST(PatternReuse, AnUnrelatedPatternIsNotReused) {
   match::MemoryCatalog catalog(config.ccv);
   const cv::Mat tile = testing::randomTile(20, 20, 1);
   catalog.add(match::patternTexture(1, tile, {}, {{20.0, 0.0}, {0.0, 20.0}}, config));
-  const cv::Mat other = testing::tiling(testing::randomTile(20, 20, 2),
-                                        {{20.0, 0.0}, {0.0, 20.0}}, 160, 160);
+  const cv::Mat other =
+      testing::tiling(testing::randomTile(20, 20, 2), {{20.0, 0.0}, {0.0, 20.0}}, 160, 160);
   const match::MatchDecision decision =
       match::MatchCascade(config).match(match::describeTexture(other, {}, config), catalog);
   EXPECT_FALSE(decision.match);

@@ -22,9 +22,7 @@ struct Lattice2 {
   // Area of one cell (0 for a degenerate basis).
   double cellArea() const { return std::abs(v1.x() * v2.y() - v1.y() * v2.x()); }
   // Lattice coordinates (c1, c2) of a point: p = c1 v1 + c2 v2.
-  Eigen::Vector2d coordinatesOf(const Eigen::Vector2d& p) const {
-    return basis().inverse() * p;
-  }
+  Eigen::Vector2d coordinatesOf(const Eigen::Vector2d& p) const { return basis().inverse() * p; }
 };
 
 }  // namespace tessera::core

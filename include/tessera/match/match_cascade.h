@@ -14,12 +14,12 @@
 
 #include <opencv2/core/mat.hpp>
 
+#include "tessera/core/lattice2.h"
 #include "tessera/core/similarity2.h"
 #include "tessera/match/ccv.h"
 #include "tessera/match/ccv_index.h"
 #include "tessera/match/feature_matcher.h"
 #include "tessera/match/fidelity.h"
-#include "tessera/core/lattice2.h"
 
 namespace tessera::match {
 

@@ -27,7 +27,7 @@ struct LatticeConfig {
   double min_period_px = 2.0;  // shorter shifts are the peak around the origin
   // Stripes: the texture stays correlated at least this well along one direction.
   double stripe_rho = 0.9;
-  double min_angle_deg = 20.0;  // between the two period vectors
+  double min_angle_deg = 20.0;      // between the two period vectors
   double repeat_error_ratio = 2.0;  // see estimateLattice
 };
 

@@ -23,10 +23,10 @@ struct PatternConfig {
   double blur_sigma_px = 1.0;  // of the grey image before the autocorrelation (0: none)
   LatticeConfig lattice;
   // A faithful tiling, over the texels it explains (overlays left out):
-  double min_psnr_db = 20.0;    // ... at least this PSNR
-  double min_explained = 0.5;   // ... explains this share of the bitmap's colour variance
+  double min_psnr_db = 20.0;        // ... at least this PSNR
+  double min_explained = 0.5;       // ... explains this share of the bitmap's colour variance
   double max_overlay_share = 0.35;  // ... leaves at most this share unexplained
-  double min_repeats = 3.0;     // ... from at least this many cells' worth of bitmap
+  double min_repeats = 3.0;         // ... from at least this many cells' worth of bitmap
   // A cell of half the area replaces a faithful one when its tiling loses at most this much.
   double finer_psnr_loss_db = 0.5;
   // Unexplained texels: colour error above this many robust noise deviations (and at least
@@ -46,12 +46,12 @@ struct Pattern {
   // point (i / W) v1 + (j / H) v2, so the bitmap is the tile rendered through the identity.
   // For stripes v2 runs along them (any length would do).
   core::Lattice2 lattice;
-  cv::Mat tile_rgb;   // CV_8UC3, W x H, W ~ |v1| and H ~ cell area / |v1|
-  cv::Mat tile_mask;  // CV_8UC1, 255 where some repetition was seen
-  double psnr_db = 0.0;     // tiling vs bitmap over the explained texels
-  double explained = 0.0;   // 1 - residual / variance over those texels
-  double repeats = 0.0;     // valid bitmap area / cell area
-  cv::Mat unexplained;      // CV_8UC1 over the bitmap: 255 in an overlay
+  cv::Mat tile_rgb;                // CV_8UC3, W x H, W ~ |v1| and H ~ cell area / |v1|
+  cv::Mat tile_mask;               // CV_8UC1, 255 where some repetition was seen
+  double psnr_db = 0.0;            // tiling vs bitmap over the explained texels
+  double explained = 0.0;          // 1 - residual / variance over those texels
+  double repeats = 0.0;            // valid bitmap area / cell area
+  cv::Mat unexplained;             // CV_8UC1 over the bitmap: 255 in an overlay
   std::vector<cv::Rect> overlays;  // bounding boxes of the unexplained blobs
 };
 
