@@ -54,11 +54,14 @@ struct TextureSummary {
   std::size_t png_bytes = 0;  // its stored (compressed) size
 };
 
-// A patch's texture: patch texel (col, row) -> texture pixel through `transform`.
+// A patch's texture: patch texel (col, row) -> texture pixel through `transform`. Layer 0
+// covers the whole patch; layers 1, 2, ... are overlays (a poster on a brick wall) drawn on
+// top of it, each over the texels that map into its texture's valid pixels.
 struct TextureInstance {
   std::int64_t run_id = 0;
   int patch_id = 0;
   int version = 0;
+  int layer = 0;
   std::int64_t texture_id = 0;
   core::Similarity2 transform;
   std::optional<double> psnr_db;  // fidelity of a reuse; nothing when the patch stored its own
