@@ -177,6 +177,21 @@ std::optional<InstanceRender> renderInstance(const nlohmann::json& patch,
   } else {
     rendered = match::renderThrough(rgb, alpha, shown.transform, width, height, shown.tiled);
   }
+  // Overlays are drawn on top, each where the patch maps into its texture's rectangle.
+  if (const auto overlays = instance->find("overlays");
+      overlays != instance->end() && overlays->is_array()) {
+    for (const auto& overlay : *overlays) {
+      const auto& o = overlay.at("transform");
+      const core::Similarity2 transform{o.at(0).get<double>(), o.at(1).get<double>(),
+                                        o.at(2).get<double>(), o.at(3).get<double>()};
+      cv::Mat overlay_rgb, overlay_alpha;
+      readRgba(run_dir / overlay.at("image").get<std::string>(), overlay_rgb, overlay_alpha);
+      const match::Rendered part =
+          match::renderThrough(overlay_rgb, overlay_alpha, transform, width, height, false);
+      part.rgb.copyTo(rendered.rgb, part.covered);
+      rendered.covered |= part.covered;
+    }
+  }
   shown.rgb = std::move(rendered.rgb);
   shown.covered = std::move(rendered.covered);
   return shown;

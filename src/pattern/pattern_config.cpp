@@ -24,6 +24,15 @@ void readConfig(const core::ConfigSection& section, PatternStageConfig& config) 
   section.read("min_overlay_error", p.min_overlay_error);
   section.read("min_overlay_px", p.min_overlay_px);
   section.read("max_tile_repetitions", p.max_tile_repetitions);
+  section.read("min_overlay_side_px", config.min_overlay_side_px);
+  section.read("min_overlay_area_px", config.min_overlay_area_px);
+  section.read("overlay_margin_px", config.overlay_margin_px);
+  if (config.min_overlay_side_px < 1 || config.min_overlay_area_px < 1 ||
+      config.overlay_margin_px < 0) {
+    throw core::ConfigError(
+        "pattern: min_overlay_side_px and min_overlay_area_px must be >= 1, overlay_margin_px "
+        ">= 0");
+  }
   if (p.analysis_max_px < 16) throw core::ConfigError("pattern: analysis_max_px must be >= 16");
   if (p.max_tile_repetitions < 0 || (p.max_tile_repetitions > 0 && p.max_tile_repetitions < 3)) {
     throw core::ConfigError("pattern: max_tile_repetitions must be 0 (all) or >= 3");

@@ -65,37 +65,52 @@ void bindMapTextures(const CommitStage& commits, const StoreCatalog& catalog,
                      const std::filesystem::path& out_dir, planes::TextureBindings& bindings,
                      RunSummary& summary) {
   std::set<std::int64_t> used;
-  for (auto& [patch_id, binding] : bindings) {
-    summary.pixels_before += static_cast<std::size_t>(binding.width) * binding.height;
-    const auto it = commits.instances().find(patch_id);
-    const auto stored = it != commits.instances().end() && it->second.version == binding.version
-                            ? catalog.load(it->second.texture_id)
-                            : nullptr;
-    if (!stored) {  // not committed: the map shows the patch's own bitmap
-      summary.pixels_after += static_cast<std::size_t>(binding.width) * binding.height;
-      continue;
-    }
-    const db::TextureInstance& instance = it->second;
-    const cv::Mat& rgb = stored->storedRgb();
+  // One layer as the map shows it; each database texture is written (and counted) once.
+  const auto show = [&](const db::TextureInstance& instance, const match::StoredTexture& stored) {
+    const cv::Mat& rgb = stored.storedRgb();
     planes::MapTexture shown;
     shown.texture_id = instance.texture_id;
     shown.image = fmt::format("textures/texture_{}.png", instance.texture_id);
     shown.width = rgb.cols;
     shown.height = rgb.rows;
     shown.transform = instance.transform;
-    shown.tiled = stored->pattern;
-    if (stored->pattern) shown.lattice = stored->lattice;
+    shown.tiled = stored.pattern;
+    if (stored.pattern) shown.lattice = stored.lattice;
     shown.reused = instance.reused;
     shown.psnr_db = instance.psnr_db;
     if (used.insert(instance.texture_id).second) {
-      texture::writeRgbaPng(out_dir / shown.image, rgb, stored->storedMask());
+      texture::writeRgbaPng(out_dir / shown.image, rgb, stored.storedMask());
       summary.pixels_after += rgb.total();
     }
+    return shown;
+  };
+  for (auto& [patch_id, binding] : bindings) {
+    summary.pixels_before += static_cast<std::size_t>(binding.width) * binding.height;
+    const auto it = commits.instances().find(patch_id);
+    const bool current = it != commits.instances().end() && !it->second.empty() &&
+                         it->second.front().version == binding.version;
+    std::vector<std::shared_ptr<const match::StoredTexture>> layers;
+    if (current) {
+      for (const db::TextureInstance& instance : it->second) {
+        layers.push_back(catalog.load(instance.texture_id));
+        if (!layers.back()) layers.clear();
+        if (layers.empty()) break;
+      }
+    }
+    if (layers.empty()) {  // not committed: the map shows the patch's own bitmap
+      summary.pixels_after += static_cast<std::size_t>(binding.width) * binding.height;
+      continue;
+    }
+    const db::TextureInstance& instance = it->second.front();
+    binding.map_texture = show(instance, *layers.front());
+    for (std::size_t i = 1; i < layers.size(); ++i) {
+      binding.overlays.push_back(show(it->second[i], *layers[i]));
+    }
+    summary.overlays += layers.size() - 1;
     summary.textured_patches += 1;
     summary.reuses += instance.reused ? 1 : 0;
     // A reuse or a pattern shows the patch through another image: its fidelity counts.
     if (instance.psnr_db) summary.shown_psnrs_db.push_back(*instance.psnr_db);
-    binding.map_texture = shown;
   }
   summary.textures_stored = commits.texturesStored();
   summary.patterns_stored = commits.patternsStored();
@@ -268,6 +283,7 @@ void writeReport(const RunSummary& summary, const std::filesystem::path& path) {
   report["db"] = summary.db;
   report["textures_stored"] = summary.textures_stored;
   report["patterns_stored"] = summary.patterns_stored;
+  report["overlays"] = summary.overlays;
   report["textured_patches"] = summary.textured_patches;
   report["reuses"] = summary.reuses;
   report["commit_failures"] = summary.commit_failures;

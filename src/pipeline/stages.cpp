@@ -426,6 +426,11 @@ void StatsSink::writeCommit(const CommitRecord& record, std::size_t batch, std::
       line["transform"] = {s.a, s.b, s.tx, s.ty};
       line["psnr_db"] = record.instance->psnr_db ? nlohmann::json(*record.instance->psnr_db)
                                                  : nlohmann::json(nullptr);
+      nlohmann::json overlays = nlohmann::json::array();
+      for (const db::TextureInstance& overlay : record.overlays) {
+        overlays.push_back({{"texture_id", overlay.texture_id}, {"reused", overlay.reused}});
+      }
+      line["overlays"] = overlays;
     }
     stats_ << line.dump() << '\n';
   }

@@ -128,54 +128,22 @@ MatchedPatch MatchStage::process(const PatchJob& job) const {
   return matched;
 }
 
-void MatchStage::findPattern(MatchedPatch& matched) const {
-  const match::TextureDescription& bitmap = *matched.description;
-  try {
-    pattern::PatternAnalysis analysis =
-        pattern::analysePattern(bitmap.rgb, bitmap.mask, patterns_.extractor);
-    matched.pattern_ms = analysis.ms;
-    if (!analysis.pattern) return;
-    // Stored only if the tiling shows the patch as faithfully as a reuse must, over all its
-    // texels: a wall with a poster the pattern does not explain keeps its own bitmap.
-    const pattern::Pattern& found = *analysis.pattern;
-    const match::Fidelity fidelity =
-        match::measureFidelity(bitmap.rgb, bitmap.mask,
-                               match::renderPattern(found.tile_rgb, found.tile_mask, found.lattice,
-                                                    {}, bitmap.rgb.cols, bitmap.rgb.rows));
-    const match::MatchConfig& limits = cascade_.config();
-    if (fidelity.psnr_db >= limits.min_psnr_db && fidelity.coverage >= limits.min_coverage) {
-      matched.pattern = std::move(analysis.pattern);
-      matched.pattern_fidelity = fidelity;
-    } else {
-      spdlog::debug(
-          "patch {} version {}: a {}x{} pattern tile shows it at {:.1f} dB over {:.0f} % "
-          "of it, short of a reuse's {:.1f} dB over {:.0f} %: stored whole",
-          matched.bitmap->id, matched.bitmap->version, found.tile_rgb.cols, found.tile_rgb.rows,
-          fidelity.psnr_db, 100.0 * fidelity.coverage, limits.min_psnr_db,
-          100.0 * limits.min_coverage);
-    }
-  } catch (const std::exception& e) {  // the bitmap is then stored as it is
-    spdlog::warn("patch {} version {}: no pattern analysis: {}", matched.bitmap->id,
-                 matched.bitmap->version, e.what());
-  }
-}
-
 CommitStage::CommitStage(db::TextureStore& store, StoreCatalog& catalog,
                          const match::MatchCascade& cascade, std::int64_t run_id)
     : store_(store), catalog_(catalog), cascade_(cascade), run_id_(run_id) {}
 
-std::optional<match::CandidateVerdict> CommitStage::recheck(const MatchedPatch& matched,
-                                                            std::size_t& newer_passing) const {
-  const match::TextureDescription& query = *matched.description;
+std::optional<match::CandidateVerdict> CommitStage::recheck(
+    const match::TextureDescription& query, const std::optional<match::CandidateVerdict>& found,
+    std::int64_t snapshot_id, std::size_t& newer_passing) const {
   const double bound = cascade_.config().ccv_max_distance;
-  const double limit = matched.decision.match ? matched.decision.match->ccv_distance : bound;
+  const double limit = found ? found->ccv_distance : bound;
   std::vector<match::CcvNeighbour> newer;
   newer_passing = 0;
   for (const auto& texture : committed_) {
-    if (texture->id <= matched.snapshot_id) continue;
+    if (texture->id <= snapshot_id) continue;
     const double d = match::ccvDistance(query.ccv.values, texture->description.ccv.values);
     newer_passing += d <= bound ? 1 : 0;
-    const bool nearer = matched.decision.match ? d < limit : d <= limit;
+    const bool nearer = found ? d < limit : d <= limit;
     if (nearer) newer.push_back({texture->id, d});
   }
   std::sort(newer.begin(), newer.end(), [](const auto& a, const auto& b) {
@@ -189,7 +157,123 @@ std::optional<match::CandidateVerdict> CommitStage::recheck(const MatchedPatch& 
     match::CandidateVerdict verdict = cascade_.tryCandidate(query, **stored, candidate.distance);
     if (verdict.accepted) return verdict;
   }
-  return matched.decision.match;
+  return found;
+}
+
+std::int64_t CommitStage::addTexture(
+    db::TextureRecord texture, std::shared_ptr<match::StoredTexture> described, db::Commit& commit,
+    std::vector<std::shared_ptr<match::StoredTexture>>& fresh) const {
+  texture.content_key = db::contentKey(texture.rgb, texture.mask);
+  texture.run_id = run_id_;
+  // The very same pixels already stored (a rerun of a recording): that texture, as it is.
+  if (const auto existing = store_.findByContentKey(texture.content_key)) return *existing;
+  for (std::size_t i = 0; i < commit.textures.size(); ++i) {
+    if (commit.textures[i].content_key == texture.content_key) {
+      return -static_cast<std::int64_t>(i) - 1;
+    }
+  }
+  commit.textures.push_back(std::move(texture));
+  fresh.push_back(std::move(described));
+  return -static_cast<std::int64_t>(commit.textures.size());
+}
+
+namespace {
+
+// A bitmap's pixels, description and features as a single texture record.
+db::TextureRecord singleRecord(const match::TextureDescription& description, double texel_m,
+                               int source_patch) {
+  db::TextureRecord texture;
+  texture.kind = db::TextureKind::kSingle;
+  texture.rgb = description.rgb;
+  texture.mask = description.mask;
+  texture.texel_m = texel_m;
+  texture.ccv = description.ccv.values;
+  texture.feature_kind = description.features.kind;
+  texture.keypoints = description.features.keypoints;
+  texture.descriptors = description.features.descriptors;
+  texture.source_patch = source_patch;
+  return texture;
+}
+
+}  // namespace
+
+void CommitStage::planCommit(const MatchedPatch& matched, db::Commit& commit,
+                             std::vector<std::shared_ptr<match::StoredTexture>>& fresh,
+                             CommitRecord& record) const {
+  const texture::PatchBitmap& bitmap = *matched.bitmap;
+  PatternPlan plan = *matched.pattern;
+  bool changed = false;
+  std::size_t ignored = 0;
+  if (!plan.base_reuse) {  // a pattern committed since the snapshot may show the rest
+    const match::TextureDescription& rest = plan.base ? *plan.base : *matched.description;
+    std::vector<PatternCandidate> candidates;
+    for (const auto& texture : committed_) {
+      if (texture->id <= matched.snapshot_id || !texture->pattern) continue;
+      const double d = match::ccvDistance(rest.ccv.values, texture->description.ccv.values);
+      if (d <= cascade_.config().ccv_max_distance) candidates.push_back({texture, d});
+    }
+    std::sort(candidates.begin(), candidates.end(), [](const auto& a, const auto& b) {
+      return a.ccv_distance != b.ccv_distance ? a.ccv_distance < b.ccv_distance
+                                              : a.texture->id < b.texture->id;
+    });
+    plan.base_reuse = reuseStoredPattern(plan.found, rest, candidates, cascade_.config());
+    changed |= plan.base_reuse.has_value();
+  }
+  for (OverlayMatch& overlay : plan.overlays) {
+    auto found = recheck(overlay.description, overlay.decision.match, matched.snapshot_id, ignored);
+    changed |= found.has_value() != overlay.decision.match.has_value() ||
+               (found && found->id != overlay.decision.match->id);
+    overlay.decision.match = found;
+  }
+  // Then the fidelity is that of what is committed; a plan that lost it stores the bitmap.
+  if (changed) plan.fidelity = layeredFidelity(*matched.description, plan, catalog_);
+
+  db::TextureInstance base;
+  base.run_id = run_id_;
+  base.patch_id = bitmap.id;
+  base.version = bitmap.version;
+  base.psnr_db = plan.fidelity.psnr_db;
+  if (plan.base_reuse) {
+    base.texture_id = plan.base_reuse->id;
+    base.transform = *plan.base_reuse->transform;
+    base.reused = true;
+    record.method = plan.base_reuse->method;
+  } else {  // one cell of the pattern, the bitmap at its origin (phase 0)
+    db::TextureRecord tile;
+    tile.kind = db::TextureKind::kPattern;
+    tile.rgb = plan.found.tile_rgb;
+    tile.mask = plan.found.tile_mask;
+    tile.lattice = plan.found.lattice;
+    tile.texel_m = bitmap.grid.texel_m;
+    tile.source_patch = bitmap.id;
+    auto described =
+        match::patternTexture(0, tile.rgb, tile.mask, *tile.lattice, cascade_.config());
+    tile.ccv = described->description.ccv.values;
+    base.texture_id = addTexture(std::move(tile), std::move(described), commit, fresh);
+    base.reused = base.texture_id > 0;
+    record.method = base.reused ? "same pixels" : "pattern";
+  }
+  commit.instances.push_back(base);
+  for (const OverlayMatch& overlay : plan.overlays) {
+    db::TextureInstance layer = base;
+    layer.layer = static_cast<int>(commit.instances.size());
+    if (const auto& match = overlay.decision.match) {
+      layer.texture_id = match->id;
+      layer.transform = patchToBox(overlay.box).then(*match->transform);
+      layer.psnr_db = match->psnr_db;
+      layer.reused = true;
+    } else {
+      auto described = std::make_shared<match::StoredTexture>();
+      described->description = overlay.description;
+      layer.texture_id =
+          addTexture(singleRecord(overlay.description, bitmap.grid.texel_m, bitmap.id),
+                     std::move(described), commit, fresh);
+      layer.transform = patchToBox(overlay.box);
+      layer.psnr_db.reset();
+      layer.reused = layer.texture_id > 0;
+    }
+    commit.instances.push_back(layer);
+  }
 }
 
 CommitRecord CommitStage::process(MatchedPatch matched) {
@@ -206,14 +290,12 @@ CommitRecord CommitStage::process(MatchedPatch matched) {
   match_timer_.add(matched.decision.ms + matched.pattern_ms);
   if (!matched.description) return record;
 
-  db::TextureInstance instance;
-  instance.run_id = run_id_;
-  instance.patch_id = bitmap.id;
-  instance.version = bitmap.version;
   db::Commit commit;
   std::size_t newer_passing = 0;
   const std::optional<match::CandidateVerdict> reuse =
-      cascade_.config().enabled ? recheck(matched, newer_passing) : std::nullopt;
+      cascade_.config().enabled ? recheck(*matched.description, matched.decision.match,
+                                          matched.snapshot_id, newer_passing)
+                                : std::nullopt;
   if (cascade_.config().enabled) {
     // As if every earlier patch had been committed before this one was matched, whatever the
     // matcher's snapshot held: the prefilter considered every texture stored so far and let
@@ -225,60 +307,35 @@ CommitRecord CommitStage::process(MatchedPatch matched) {
     ccv_considered_ += record.ccv_considered;
     ccv_removed_ += record.ccv_removed;
   }
-  std::shared_ptr<match::StoredTexture> fresh;
+  std::vector<std::shared_ptr<match::StoredTexture>> fresh;  // parallel to commit.textures
   if (reuse) {
+    db::TextureInstance instance;
+    instance.run_id = run_id_;
+    instance.patch_id = bitmap.id;
+    instance.version = bitmap.version;
     instance.texture_id = reuse->id;
     instance.transform = *reuse->transform;
     instance.psnr_db = reuse->psnr_db;
     instance.reused = true;
     record.method = reuse->method;
+    commit.instances.push_back(instance);
+  } else if (matched.pattern) {
+    planCommit(matched, commit, fresh, record);
   } else {
-    db::TextureRecord texture;
-    texture.kind = db::TextureKind::kSingle;
+    db::TextureInstance instance;
+    instance.run_id = run_id_;
+    instance.patch_id = bitmap.id;
+    instance.version = bitmap.version;
+    db::TextureRecord texture = singleRecord(*matched.description, bitmap.grid.texel_m, bitmap.id);
     texture.rgb = bitmap.image;
-    texture.mask = matched.description->mask;
-    texture.texel_m = bitmap.grid.texel_m;
-    texture.ccv = matched.description->ccv.values;
-    texture.feature_kind = matched.description->features.kind;
-    texture.keypoints = matched.description->features.keypoints;
-    texture.descriptors = matched.description->features.descriptors;
-    texture.content_key = db::contentKey(texture.rgb, texture.mask);
-    texture.run_id = run_id_;
-    texture.source_patch = bitmap.id;
-    if (matched.pattern) {  // one cell of the pattern, the bitmap at its origin (phase 0)
-      const pattern::Pattern& found = *matched.pattern;
-      texture.kind = db::TextureKind::kPattern;
-      texture.rgb = found.tile_rgb;
-      texture.mask = found.tile_mask;
-      texture.lattice = found.lattice;
-      texture.feature_kind.clear();
-      texture.keypoints.clear();
-      texture.descriptors = cv::Mat();
-      texture.content_key = db::contentKey(texture.rgb, texture.mask);
-      instance.psnr_db = matched.pattern_fidelity->psnr_db;
-    }
-    // The very same pixels already stored (a rerun of a recording): that texture, as it is.
-    if (const auto existing = store_.findByContentKey(texture.content_key)) {
-      instance.texture_id = *existing;
-      instance.psnr_db = matched.pattern ? matched.pattern_fidelity->psnr_db : 99.0;
-      instance.reused = true;
-      record.method = "same pixels";
-    } else {
-      if (matched.pattern) {
-        fresh = match::patternTexture(0, texture.rgb, texture.mask, *texture.lattice,
-                                      cascade_.config());
-        texture.ccv = fresh->description.ccv.values;
-        record.method = "pattern";
-      } else {
-        fresh = std::make_shared<match::StoredTexture>();
-        fresh->description = *matched.description;
-        record.method = "stored";
-      }
-      commit.textures.push_back(std::move(texture));
-      instance.texture_id = -1;
-    }
+    auto described = std::make_shared<match::StoredTexture>();
+    described->description = *matched.description;
+    instance.texture_id = addTexture(std::move(texture), std::move(described), commit, fresh);
+    instance.reused = instance.texture_id > 0;
+    if (instance.reused) instance.psnr_db = 99.0;
+    record.method = instance.reused ? "same pixels" : "stored";
+    commit.instances.push_back(instance);
   }
-  commit.instances.push_back(instance);
   std::vector<std::int64_t> ids;
   try {
     ids = store_.commit(commit);
@@ -288,21 +345,26 @@ CommitRecord CommitStage::process(MatchedPatch matched) {
     ++commit_failures_;
     return record;
   }
-  if (fresh) {
-    instance.texture_id = ids.at(0);
-    fresh->id = ids.at(0);
-    committed_.push_back(fresh);
-    catalog_.add(fresh);
+  for (std::size_t i = 0; i < fresh.size(); ++i) {
+    fresh[i]->id = ids.at(i);
+    committed_.push_back(fresh[i]);
+    catalog_.add(fresh[i]);
     ++textures_stored_;
-    patterns_stored_ += fresh->pattern ? 1 : 0;
+    patterns_stored_ += fresh[i]->pattern ? 1 : 0;
   }
-  if (!texture_pixels_.count(instance.texture_id)) {
-    const auto stored = catalog_.load(instance.texture_id);
-    texture_pixels_[instance.texture_id] =
-        stored ? stored->storedRgb().total() : bitmap.grid.texels();
+  for (db::TextureInstance& instance : commit.instances) {
+    if (instance.texture_id < 0) {
+      instance.texture_id = ids.at(static_cast<std::size_t>(-instance.texture_id - 1));
+    }
+    if (!texture_pixels_.count(instance.texture_id)) {
+      const auto stored = catalog_.load(instance.texture_id);
+      texture_pixels_[instance.texture_id] =
+          stored ? stored->storedRgb().total() : bitmap.grid.texels();
+    }
   }
-  instances_[bitmap.id] = instance;
-  record.instance = instance;
+  instances_[bitmap.id] = commit.instances;
+  record.instance = commit.instances.front();
+  record.overlays.assign(commit.instances.begin() + 1, commit.instances.end());
   record.commit_latency_ms = msSince(matched.finalized_at);
   commit_latencies_ms_.push_back(record.commit_latency_ms);
   return record;

@@ -1,6 +1,7 @@
 #include "tessera/planes/patch_export.h"
 
 #include <algorithm>
+#include <array>
 #include <fstream>
 #include <set>
 
@@ -67,6 +68,45 @@ Eigen::Vector2d textureCoordinates(const TextureBinding& texture, double u, doub
   return {std::clamp(s, 0.0, 1.0), std::clamp(t, 0.0, 1.0)};
 }
 
+// An overlay as its own object: the quad its texture's rectangle covers on the patch, lifted
+// kOverlayLift towards the side the camera saw (-n) so that it is drawn over the pattern.
+// Returns the vertex count after it.
+constexpr double kOverlayLift_m = 0.001;
+
+std::size_t writeOverlay(std::ofstream& out, const Patch& patch, const Patch::Frame& frame,
+                         const TextureBinding& texture, const MapTexture& overlay,
+                         std::size_t layer, std::size_t vertices) {
+  const core::Similarity2 texture_to_patch = overlay.transform.inverse();
+  const double w = overlay.width, h = overlay.height;
+  // Texture pixel corners, and their OBJ texture coordinates (t up).
+  const std::array<Eigen::Vector2d, 4> corners{
+      Eigen::Vector2d(-0.5, -0.5), {w - 0.5, -0.5}, {w - 0.5, h - 0.5}, {-0.5, h - 0.5}};
+  const std::array<Eigen::Vector2d, 4> st{Eigen::Vector2d(0, 1), {1, 1}, {1, 0}, {0, 0}};
+  std::array<Eigen::Vector2d, 4> uv;
+  for (std::size_t i = 0; i < 4; ++i) {
+    const Eigen::Vector2d texel = texture_to_patch.apply(corners[i]) + Eigen::Vector2d(0.5, 0.5);
+    uv[i] = texture.origin_uv +
+            texture.texel_m * (texel.x() * texture.x_axis + texel.y() * texture.y_axis);
+  }
+  out << fmt::format("o patch_{}_v{}_overlay_{}\nusemtl texture_{}\n", patch.id, patch.version,
+                     layer, overlay.texture_id);
+  for (std::size_t i = 0; i < 4; ++i) {
+    const Eigen::Vector3d X = toWorld(frame, uv[i].x(), uv[i].y()) - kOverlayLift_m * patch.normal;
+    out << fmt::format("v {:.4f} {:.4f} {:.4f}\nvt {:.5f} {:.5f}\n", X.x(), X.y(), X.z(), st[i].x(),
+                       st[i].y());
+  }
+  // Clockwise in (u, v), as the patch's faces: the face's normal is -n.
+  const Eigen::Vector2d a = uv[1] - uv[0], b = uv[3] - uv[0];
+  const bool clockwise = a.x() * b.y() - a.y() * b.x() < 0.0;
+  const std::size_t f = vertices + 1;
+  if (clockwise) {
+    out << fmt::format("f {0}/{0} {1}/{1} {2}/{2} {3}/{3}\n", f, f + 1, f + 2, f + 3);
+  } else {
+    out << fmt::format("f {0}/{0} {1}/{1} {2}/{2} {3}/{3}\n", f, f + 3, f + 2, f + 1);
+  }
+  return vertices + 4;
+}
+
 std::string materialOf(const Patch& patch, const TextureBinding& texture) {
   return texture.map_texture ? fmt::format("texture_{}", texture.map_texture->texture_id)
                              : fmt::format("patch_{}", patch.id);
@@ -83,13 +123,18 @@ void writeMaterials(const PatchMap& map, const TextureBindings& textures,
   for (const Patch& patch : map.patches()) {
     const TextureBinding* texture = patch.finalized ? textureOf(patch, textures) : nullptr;
     if (texture == nullptr) continue;
-    if (const auto& shown = texture->map_texture) {
-      if (!written.insert(shown->texture_id).second) continue;
-      // A pattern tile repeats (MTL's default wrap); anything else stops at its edges.
-      const char* wrap = shown->tiled ? "" : "-clamp on ";
-      out << fmt::format(
-          "newmtl {}\nKa 1 1 1\nKd 1 1 1\nKs 0 0 0\nillum 1\nmap_Kd {}{}\nmap_d {}{}\n\n",
-          materialOf(patch, *texture), wrap, shown->image, wrap, shown->image);
+    if (texture->map_texture) {
+      std::vector<const MapTexture*> layers{&*texture->map_texture};
+      for (const MapTexture& overlay : texture->overlays) layers.push_back(&overlay);
+      for (const MapTexture* shown : layers) {
+        if (!written.insert(shown->texture_id).second) continue;
+        // A pattern tile repeats (MTL's default wrap); anything else stops at its edges.
+        const char* wrap = shown->tiled ? "" : "-clamp on ";
+        out << fmt::format(
+            "newmtl texture_{}\nKa 1 1 1\nKd 1 1 1\nKs 0 0 0\nillum 1\nmap_Kd {}{}\nmap_d "
+            "{}{}\n\n",
+            shown->texture_id, wrap, shown->image, wrap, shown->image);
+      }
       continue;
     }
     out << fmt::format(
@@ -159,6 +204,10 @@ void writePatchesObj(const PatchMap& map, const std::filesystem::path& path,
       polyline(part.outer);
       for (const Polygon2& hole : part.holes) polyline(hole);
     }
+    if (texture == nullptr) continue;
+    for (std::size_t k = 0; k < texture->overlays.size(); ++k) {
+      vertices = writeOverlay(out, patch, frame, *texture, texture->overlays[k], k + 1, vertices);
+    }
   }
   checkWritten(out, path);
 }
@@ -206,6 +255,19 @@ void writePatchesJson(const PatchMap& map, const std::filesystem::path& path,
                                     : nlohmann::json(nullptr)},
           {"reused", shown.reused},
           {"psnr_db", shown.psnr_db ? nlohmann::json(*shown.psnr_db) : nullptr}};
+      nlohmann::json overlays = nlohmann::json::array();
+      for (const MapTexture& overlay : texture->overlays) {
+        const core::Similarity2& o = overlay.transform;
+        overlays.push_back(
+            {{"texture_id", overlay.texture_id},
+             {"image", overlay.image},
+             {"width", overlay.width},
+             {"height", overlay.height},
+             {"transform", {o.a, o.b, o.tx, o.ty}},
+             {"reused", overlay.reused},
+             {"psnr_db", overlay.psnr_db ? nlohmann::json(*overlay.psnr_db) : nullptr}});
+      }
+      instance_json["overlays"] = overlays;
     }
     patches.push_back({{"id", patch.id},
                        {"version", patch.version},

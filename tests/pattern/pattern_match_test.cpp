@@ -5,6 +5,7 @@
 
 #include "pattern/pattern_test_support.h"
 #include "tessera/match/match_cascade.h"
+#include "tessera/match/pattern_alignment.h"
 #include "tessera/pattern/pattern_extractor.h"
 
 namespace tessera::pattern {
@@ -51,6 +52,49 @@ TEST(PatternReuse, AnUnrelatedPatternIsNotReused) {
   const match::MatchDecision decision =
       match::MatchCascade(config).match(match::describeTexture(other, {}, config), catalog);
   EXPECT_FALSE(decision.match);
+}
+
+TEST(PatternReuse, TheLatticesAlignTwoPatchesTurnedAFewDegreesApart) {
+  // Two walls of the same bricks, each texel grid aligned with its own patch: 2.5 degrees and
+  // 0.4 % of scale apart, which quarter-turn cross-correlation cannot follow over 300 texels.
+  const cv::Mat tile = testing::randomTile(24, 14, 5);
+  const core::Lattice2 truth{{24.0, 0.0}, {12.0, 14.0}};
+  const cv::Mat first = testing::tiling(tile, truth, 300, 220, {1.0, 0.0, 7.0, 2.0});
+  const PatternAnalysis analysis = analysePattern(first, {});
+  ASSERT_TRUE(analysis.pattern) << analysis.reason;
+  const match::MatchConfig config;
+  const auto stored =
+      match::patternTexture(1, analysis.pattern->tile_rgb, analysis.pattern->tile_mask,
+                            analysis.pattern->lattice, config);
+
+  const core::Similarity2 second_to_frame =
+      core::Similarity2::fromAngleScale(2.5 * M_PI / 180.0, 1.004, 31.0, -9.0);
+  const cv::Mat second = testing::tiling(tile, truth, 300, 220, second_to_frame);
+  const PatternAnalysis other = analysePattern(second, {});
+  ASSERT_TRUE(other.pattern) << other.reason;
+  const std::optional<core::Similarity2> aligned = match::alignPattern(
+      other.pattern->tile_rgb, other.pattern->tile_mask, other.pattern->lattice, *stored);
+  ASSERT_TRUE(aligned);
+  const core::Similarity2 refined = match::refineAlignment(second, {}, *stored, *aligned);
+  // The first bitmap is the stored frame: the truth is second_to_frame followed by the
+  // first's frame -> texel map, whose turn is 0.
+  EXPECT_NEAR(refined.angleRad() * 180.0 / M_PI, 2.5, 0.1);
+  EXPECT_NEAR(refined.scale(), 1.004, 0.002);
+  const match::Fidelity fidelity = match::measureFidelity(
+      second, {}, match::renderStored(*stored, refined, second.cols, second.rows));
+  EXPECT_GT(fidelity.psnr_db, 30.0);
+
+  // Through quarter-turn NCC alone the same pair is not faithful.
+  const match::CandidateVerdict ncc = match::MatchCascade(config).tryCandidate(
+      match::describeTexture(second, {}, config), *stored, 0.0);
+  EXPECT_FALSE(ncc.accepted) << ncc.psnr_db << " dB";
+  EXPECT_LT(ncc.psnr_db, config.min_psnr_db);
+
+  // Another lattice shape is not a similarity of this one.
+  const auto square = match::patternTexture(2, testing::randomTile(20, 20, 6), {},
+                                            {{20.0, 0.0}, {0.0, 20.0}}, config);
+  EXPECT_FALSE(match::alignPattern(other.pattern->tile_rgb, other.pattern->tile_mask,
+                                   other.pattern->lattice, *square));
 }
 
 }  // namespace

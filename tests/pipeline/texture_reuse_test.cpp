@@ -1,11 +1,14 @@
 // The texture database on the default recording: what is reused, that it does not depend on the
 // thread count, and that a second run of the same place reuses what the first stored.
+#include <fstream>
+#include <iterator>
 #include <map>
 #include <optional>
 #include <set>
 #include <string>
 #include <tuple>
 
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
@@ -84,6 +87,37 @@ TEST(TextureReuse, TheSecondTableReusesTheFirstAndOneOrTwoThreadsStoreTheSame) {
   for (const double psnr : two.shown_psnrs_db) {  // reuses and patterns
     EXPECT_GE(psnr, loadRunConfig(std::nullopt).match.min_psnr_db);
   }
+
+  // The north brick wall carries poster A: it reuses the south wall's pattern tile (their
+  // grids turned a few degrees apart), with the poster (0.6 x 0.85 m) as an overlay whose box
+  // holds it (the box is the texel grid's, turned against the poster), drawn as its own
+  // object in the OBJ.
+  ASSERT_TRUE(texture_of_plane.count("wall_north") && texture_of_plane.count("wall_south"));
+  EXPECT_EQ(texture_of_plane["wall_north"], texture_of_plane["wall_south"]);
+  EXPECT_EQ(one.overlays, two.overlays);
+  std::optional<int> north_patch;
+  for (const auto& patch : figures["textures"]) {
+    if (patch["plane"] == "wall_north") north_patch = patch["patch"].get<int>();
+  }
+  ASSERT_TRUE(north_patch);
+  std::ifstream patches_file(root / "two/patches.json");
+  const nlohmann::json patches = nlohmann::json::parse(patches_file);
+  bool poster = false;
+  for (const auto& patch : patches["patches"]) {
+    if (patch["id"] != *north_patch || patch["instance"].is_null()) continue;
+    EXPECT_TRUE(patch["instance"]["reused"].get<bool>());
+    const double texel_m = patch["texture"]["texel_m"];
+    const double poster_w = 0.6 / texel_m, poster_h = 0.85 / texel_m;
+    for (const auto& overlay : patch["instance"]["overlays"]) {
+      const double w = overlay["width"], h = overlay["height"];
+      poster |= w >= poster_w && h >= poster_h && w * h <= 1.6 * poster_w * poster_h;
+    }
+  }
+  EXPECT_TRUE(poster);
+  std::ifstream obj(root / "two/patches.obj");
+  const std::string text((std::istreambuf_iterator<char>(obj)), std::istreambuf_iterator<char>());
+  EXPECT_NE(text.find(fmt::format("o patch_{}_v", *north_patch)), std::string::npos);
+  EXPECT_NE(text.find("_overlay_1"), std::string::npos);
 }
 
 // Repeated runs in one place: the second run with the same database reuses at least 90 % of its

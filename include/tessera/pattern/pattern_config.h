@@ -9,6 +9,12 @@ namespace tessera::pattern {
 struct PatternStageConfig {
   bool enabled = true;
   PatternConfig extractor;
+  // Overlays with a box at least this many texels a side and of this area become their own
+  // textures, in a box grown by overlay_margin_px; thinner blobs (where a neighbouring surface
+  // bleeds into the bitmap's edge) stay with the pattern and count against its fidelity.
+  int min_overlay_side_px = 8;
+  int min_overlay_area_px = 256;
+  int overlay_margin_px = 2;
 };
 
 // Reads the `pattern:` keys; throws core::ConfigError on a value out of range.

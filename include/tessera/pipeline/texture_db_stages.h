@@ -37,6 +37,26 @@ struct PatchJob {
   SteadyTime finalized_at;
 };
 
+// A box of a pattern patch's bitmap that the tiling does not explain (a poster on a brick
+// wall), matched like any bitmap: drawn on top of the pattern from a texture it reuses, or
+// from its own crop.
+struct OverlayMatch {
+  cv::Rect box;                           // in bitmap texels
+  match::TextureDescription description;  // the crop, with the bitmap's mask
+  match::MatchDecision decision;          // the crop's texel -> a stored texture, if any
+};
+
+// A bitmap that matched nothing, shown as a periodic pattern with its overlays on top.
+struct PatternPlan {
+  pattern::Pattern found;  // the new tile and its lattice, in bitmap texels
+  // The bitmap without its overlay boxes (only when there are overlays), and a stored
+  // pattern that shows it (then reused instead of the new tile).
+  std::optional<match::TextureDescription> base;
+  std::optional<match::CandidateVerdict> base_reuse;
+  std::vector<OverlayMatch> overlays;
+  match::Fidelity fidelity;  // of the pattern and overlays together, over the whole bitmap
+};
+
 // A patch's bitmap, its description and the matcher's decision.
 struct MatchedPatch {
   std::size_t sequence = 0;
@@ -46,10 +66,9 @@ struct MatchedPatch {
   std::optional<texture::PatchBitmap> bitmap;  // nothing when it could not be built
   std::optional<match::TextureDescription> description;
   match::MatchDecision decision;
-  // A bitmap that matched nothing: its periodic pattern, when one reproduces it as faithfully
-  // as a reuse must (then stored instead of the bitmap), and what the tiling scored.
-  std::optional<pattern::Pattern> pattern;
-  std::optional<match::Fidelity> pattern_fidelity;
+  // A bitmap that matched nothing: its periodic pattern with its overlays, when together they
+  // show it as faithfully as a reuse must (then stored instead of the bitmap).
+  std::optional<PatternPlan> pattern;
   double pattern_ms = 0.0;
   double describe_ms = 0.0;      // CCV and features of the new bitmap
   std::int64_t snapshot_id = 0;  // the newest texture the matcher could see
@@ -108,7 +127,10 @@ class MatchStage {
   MatchedPatch process(const PatchJob& job) const;
 
  private:
+  // pattern_stage.cpp
   void findPattern(MatchedPatch& matched) const;
+  std::optional<PatternPlan> planPattern(const match::TextureDescription& bitmap,
+                                         pattern::Pattern found) const;
 
   const TextureStage& textures_;
   const match::MatchCascade& cascade_;
@@ -116,10 +138,33 @@ class MatchStage {
   pattern::PatternStageConfig patterns_;
 };
 
+// A stored pattern the cascade's prefilter let through, with its CCV distance.
+struct PatternCandidate {
+  std::shared_ptr<const match::StoredTexture> texture;
+  double ccv_distance = 0.0;
+};
+
+// The first candidate that shows `shown` (a bitmap, or the part its overlays leave) as
+// faithfully as a reuse must, aligned to `found` through the two lattices (match/
+// pattern_alignment.h): two walls of the same bricks share one tile even when their texel
+// grids are turned against each other.
+std::optional<match::CandidateVerdict> reuseStoredPattern(
+    const pattern::Pattern& found, const match::TextureDescription& shown,
+    const std::vector<PatternCandidate>& candidates, const match::MatchConfig& config);
+
+// Patch texel -> texel of the crop `box` (an overlay's own texture).
+core::Similarity2 patchToBox(const cv::Rect& box);
+
+// How faithfully a pattern (a new tile, or the stored pattern `base_reuse` names) with its
+// overlays (each a reuse, or its own crop) shows `bitmap`; stored textures from `catalog`.
+match::Fidelity layeredFidelity(const match::TextureDescription& bitmap, const PatternPlan& plan,
+                                const match::TextureCatalog& catalog);
+
 // What one commit decided, for stats.jsonl.
 struct CommitRecord {
   int patch_id = 0, version = 0;
   std::optional<db::TextureInstance> instance;  // nothing: no bitmap, or the commit failed
+  std::vector<db::TextureInstance> overlays;    // layers 1.. drawn on top of `instance`
   // "ncc", "features", "same pixels", "stored" or "pattern"
   std::string method;
   std::size_t ccv_considered = 0, ccv_removed = 0;
@@ -135,8 +180,9 @@ class CommitStage {
 
   CommitRecord process(MatchedPatch matched);
 
-  // The newest instance of each patch id, and the textures they use (pixels per texture).
-  const std::map<int, db::TextureInstance>& instances() const { return instances_; }
+  // The newest instances of each patch id (its layers, 0 first), and the textures they use
+  // (pixels per texture).
+  const std::map<int, std::vector<db::TextureInstance>>& instances() const { return instances_; }
   const std::map<std::int64_t, std::size_t>& texturePixels() const { return texture_pixels_; }
   std::size_t texturesStored() const { return textures_stored_; }
   std::size_t patternsStored() const { return patterns_stored_; }
@@ -151,15 +197,26 @@ class CommitStage {
   // The cascade over textures committed after the matcher's snapshot, nearer in CCV than the
   // candidate it accepted (all of them when it accepted none); `newer_passing` gets how many
   // of those textures are within the prefilter's bound.
-  std::optional<match::CandidateVerdict> recheck(const MatchedPatch& matched,
-                                                 std::size_t& newer_passing) const;
+  std::optional<match::CandidateVerdict> recheck(
+      const match::TextureDescription& query, const std::optional<match::CandidateVerdict>& found,
+      std::int64_t snapshot_id, std::size_t& newer_passing) const;
+  // A pattern plan's textures and instances (layer 0 the pattern, then the overlays) into
+  // `commit`; new textures' descriptions into `fresh` (parallel to commit.textures).
+  void planCommit(const MatchedPatch& matched, db::Commit& commit,
+                  std::vector<std::shared_ptr<match::StoredTexture>>& fresh,
+                  CommitRecord& record) const;
+  // A new texture for `commit`, or the id of one with the same pixels already stored
+  // (negative: index into commit.textures, as db::Commit counts them).
+  std::int64_t addTexture(db::TextureRecord texture,
+                          std::shared_ptr<match::StoredTexture> described, db::Commit& commit,
+                          std::vector<std::shared_ptr<match::StoredTexture>>& fresh) const;
 
   db::TextureStore& store_;
   StoreCatalog& catalog_;
   const match::MatchCascade& cascade_;
   std::int64_t run_id_;
   std::vector<std::shared_ptr<const match::StoredTexture>> committed_;  // this run, ascending id
-  std::map<int, db::TextureInstance> instances_;
+  std::map<int, std::vector<db::TextureInstance>> instances_;
   std::map<std::int64_t, std::size_t> texture_pixels_;
   std::size_t textures_stored_ = 0, patterns_stored_ = 0, commit_failures_ = 0;
   std::size_t ccv_considered_ = 0, ccv_removed_ = 0;

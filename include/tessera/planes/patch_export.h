@@ -7,6 +7,7 @@
 #include <map>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "tessera/core/lattice2.h"
 #include "tessera/core/similarity2.h"
@@ -41,6 +42,9 @@ struct TextureBinding {
   int width = 0, height = 0;
   std::size_t observed = 0, inpainted = 0;
   std::optional<MapTexture> map_texture;  // what the map shows; the bitmap itself when absent
+  // Drawn on top of map_texture (a poster on a patterned wall), each where the patch's texels
+  // map into its texture's rectangle.
+  std::vector<MapTexture> overlays;
 };
 using TextureBindings = std::map<int, TextureBinding>;  // by patch id
 
@@ -50,7 +54,9 @@ using TextureBindings = std::map<int, TextureBinding>;  // by patch id
 // texture coordinates and a material "patch_<id>" whose map_Kd is its image, in a .mtl file
 // next to the OBJ; a patch with a map texture uses the material "texture_<id>" of that database
 // texture instead, shared by every patch that reuses it, with texture coordinates carried
-// through the instance's transform. Throws core::Error naming the file if writing fails.
+// through the instance's transform. Each overlay is one more object ("..._overlay_<k>"): the
+// quad its texture covers, 1 mm in front of the patch. Throws core::Error naming the file if
+// writing fails.
 void writePatchesObj(const PatchMap& map, const std::filesystem::path& path,
                      const TextureBindings& textures = {});
 
@@ -59,7 +65,9 @@ void writePatchesObj(const PatchMap& map, const std::filesystem::path& path,
 // "outline": [{"outer": [[u, v], ...], "holes": [[[u, v], ...], ...]}], "texture": {"image",
 // "state_image", "texel_m", "origin_uv", "x_axis", "y_axis", "width", "height", "observed",
 // "inpainted"} or null, "instance": {"texture_id", "image", "width", "height", "transform":
-// [a, b, tx, ty], "tiled", "reused", "psnr_db"} or null}]}, finalized only.
+// [a, b, tx, ty], "tiled", "lattice": [v1x, v1y, v2x, v2y] or null, "reused", "psnr_db",
+// "overlays": [{"texture_id", "image", "width", "height", "transform", "reused", "psnr_db"}]}
+// or null}]}, finalized only.
 void writePatchesJson(const PatchMap& map, const std::filesystem::path& path,
                       const TextureBindings& textures = {});
 
