@@ -1,4 +1,5 @@
 #include "tessera/pattern/pattern_extractor.h"
+#include "tessera/pattern/overlays.h"
 
 #include <algorithm>
 #include <array>
@@ -37,51 +38,11 @@ Faithfulness judgeTiling(const cv::Mat& rgb, const TilingError& tiling,
   Faithfulness out;
   const cv::Mat& error = tiling.error;
   const cv::Mat& valid = tiling.valid;
-  // The median error from a histogram of 1/8 grey level bins (a sort would cost more than all
-  // the rest of the judgement).
-  constexpr double kBinsPerLevel = 8.0;
-  std::vector<int> histogram(static_cast<std::size_t>(256 * kBinsPerLevel) + 1, 0);
-  int valid_texels = 0;
-  for (int row = 0; row < error.rows; ++row) {
-    const auto* e = error.ptr<float>(row);
-    const auto* v = valid.ptr<std::uint8_t>(row);
-    for (int col = 0; col < error.cols; ++col) {
-      if (v[col] == 0) continue;
-      ++histogram[std::min(histogram.size() - 1, static_cast<std::size_t>(e[col] * kBinsPerLevel))];
-      ++valid_texels;
-    }
-  }
-  if (valid_texels == 0) return out;
-  const auto valid_count = static_cast<double>(valid_texels);
-  std::size_t bin = 0;
-  for (int below = 0; below + histogram[bin] <= valid_texels / 2; ++bin) below += histogram[bin];
-  const double sigma = 1.4826 * (static_cast<double>(bin) + 0.5) / kBinsPerLevel;
-  const double threshold = std::max(config.overlay_sigmas * sigma, config.min_overlay_error);
-
-  // Unexplained blobs: the error, averaged over a few texels so that an object's texels that
-  // happen to resemble the pattern still count as the object's, above the threshold, in
-  // blobs of at least min_overlay_px texels, holes filled.
-  cv::Mat smooth;
-  cv::blur(error, smooth, {7, 7});
-  cv::Mat high = (smooth > threshold) & valid;
-  out.unexplained = cv::Mat(rgb.size(), CV_8UC1, cv::Scalar(0));
-  if (cv::countNonZero(high) > 0) {
-    std::vector<std::vector<cv::Point>> contours;
-    cv::findContours(high, contours, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_SIMPLE);
-    for (std::size_t i = 0; i < contours.size(); ++i) {
-      if (cv::contourArea(contours[i]) < config.min_overlay_px) continue;
-      cv::drawContours(out.unexplained, contours, static_cast<int>(i), cv::Scalar(255), cv::FILLED);
-      out.overlays.push_back(cv::boundingRect(contours[i]));
-    }
-    if (!out.overlays.empty()) {
-      cv::dilate(out.unexplained, out.unexplained,
-                 cv::getStructuringElement(cv::MORPH_ELLIPSE, {5, 5}));
-      out.unexplained &= valid;
-    }
-  }
-  std::sort(out.overlays.begin(), out.overlays.end(),
-            [](const cv::Rect& p, const cv::Rect& q) { return p.area() > q.area(); });
-  out.unexplained_share = cv::countNonZero(out.unexplained) / valid_count;
+  Overlays overlays = findOverlays(
+      error, valid, {config.overlay_sigmas, config.min_overlay_error, config.min_overlay_px});
+  out.unexplained = std::move(overlays.unexplained);
+  out.overlays = std::move(overlays.blobs);
+  out.unexplained_share = overlays.unexplained_share;
 
   // PSNR and explained variance over the texels the tiling explains: sums of the squared
   // residual (3 e^2 a texel) and of each channel and its square.
