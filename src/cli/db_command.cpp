@@ -67,6 +67,7 @@ int show(const db::TextureStore& store, std::int64_t id, bool json) {
     uses.push_back({{"run_id", i.run_id},
                     {"patch_id", i.patch_id},
                     {"version", i.version},
+                    {"layer", i.layer},
                     {"transform", {i.transform.a, i.transform.b, i.transform.tx, i.transform.ty}},
                     {"angle_deg", i.transform.angleRad() * 180.0 / M_PI},
                     {"scale", i.transform.scale()},

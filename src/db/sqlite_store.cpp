@@ -51,14 +51,22 @@ constexpr const char* kInsertTexture =
     "descriptors, lattice_v1x, lattice_v1y, lattice_v2x, lattice_v2y, content_key, run_id, "
     "source_patch, name) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)";
 
-// A newer or equal version of the patch replaces the stored instance; an older one (arriving
-// late) is ignored, so the row always holds the patch's latest texture.
+// The version of a (run, patch) that is stored: every layer has it (NULL when none is stored).
+constexpr const char* kStoredVersion =
+    "SELECT max(version) FROM instances WHERE run_id = ? AND patch_id = ?";
+
+// Every layer of an older version goes when a newer version of the patch arrives, also the
+// layers the newer version no longer has.
+constexpr const char* kDeleteOlderVersions =
+    "DELETE FROM instances WHERE run_id = ? AND patch_id = ? AND version < ?";
+
+// After kDeleteOlderVersions only rows of the same version can conflict: the layer is replaced.
 constexpr const char* kUpsertInstance =
-    "INSERT INTO instances (run_id, patch_id, version, texture_id, a, b, tx, ty, psnr_db, reused) "
-    "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?) ON CONFLICT (run_id, patch_id) DO UPDATE SET "
-    "version = excluded.version, texture_id = excluded.texture_id, a = excluded.a, "
+    "INSERT INTO instances (run_id, patch_id, version, layer, texture_id, a, b, tx, ty, psnr_db, "
+    "reused) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?) ON CONFLICT (run_id, patch_id, layer) DO "
+    "UPDATE SET version = excluded.version, texture_id = excluded.texture_id, a = excluded.a, "
     "b = excluded.b, tx = excluded.tx, ty = excluded.ty, psnr_db = excluded.psnr_db, "
-    "reused = excluded.reused WHERE excluded.version >= instances.version";
+    "reused = excluded.reused";
 
 std::int64_t insertTexture(Statement& insert, Connection& db, const EncodedTexture& encoded) {
   const TextureRecord& r = *encoded.record;
@@ -110,20 +118,26 @@ SqliteStore::SqliteStore(const std::filesystem::path& path, const OpenOptions& o
     }
     writer_ = std::make_unique<Connection>(path_, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE);
     configureWriter(*writer_);
-    createSchema(*writer_);
+    schema_version_ = createSchema(*writer_);
+    if (schema_version_ < kSchemaVersion) schema_version_ = migrateSchema(*writer_);
     return;
   }
   // Checked through a read-only connection first: a file this build must refuse (a newer
   // schema, another application's) is never written to, not even to switch it to WAL.
   auto checker = std::make_unique<Connection>(path_, SQLITE_OPEN_READONLY);
   configureReader(*checker);
-  checkSchema(*checker);
+  schema_version_ = checkSchema(*checker);
   if (!options.read_only) {
     writer_ = std::make_unique<Connection>(path_, SQLITE_OPEN_READWRITE);
     if (sqlite3_db_readonly(writer_->handle(), "main") == 1) {
       throw core::Error(location_ +
                         ": cannot write to it (read-only file or folder); open it "
                         "read-only to read it");
+    }
+    if (schema_version_ < kSchemaVersion) {
+      // Before the switch to WAL: a migration that fails leaves the file exactly as it was.
+      configureReader(*writer_);
+      schema_version_ = migrateSchema(*writer_);
     }
     configureWriter(*writer_);
   }
@@ -230,43 +244,65 @@ std::vector<std::int64_t> SqliteStore::writeCommit(const Commit& commit,
 
   Statement texture_exists(db, "SELECT 1 FROM textures WHERE id = ?");
   Statement run_exists(db, "SELECT 1 FROM runs WHERE id = ?");
+  Statement stored_version(db, kStoredVersion);
+  Statement delete_older(db, kDeleteOlderVersions);
   Statement upsert(db, kUpsertInstance);
   for (const TextureInstance& instance : commit.instances) {
+    const std::string which =
+        instance.layer == 0 ? fmt::format("patch {}", instance.patch_id)
+                            : fmt::format("patch {} layer {}", instance.patch_id, instance.layer);
+    if (instance.layer < 0) {
+      throw core::Error(
+          fmt::format("{}: the instance of {} has a negative layer (0 is the "
+                      "patch's texture, 1.. its overlays)",
+                      location_, which));
+    }
     std::int64_t texture_id = instance.texture_id;
     if (texture_id < 0) {
       const auto index = static_cast<std::size_t>(-(texture_id + 1));
       if (index >= ids.size()) {
         throw core::Error(
-            fmt::format("{}: the instance of patch {} refers to new texture {}, "
+            fmt::format("{}: the instance of {} refers to new texture {}, "
                         "but the commit has {}",
-                        location_, instance.patch_id, index, ids.size()));
+                        location_, which, index, ids.size()));
       }
       texture_id = ids[index];
     } else if (!rowExists(texture_exists, texture_id)) {
       // The foreign key would refuse it too, but without saying which.
       throw core::Error(
-          fmt::format("{}: the instance of patch {} refers to texture {}, which "
+          fmt::format("{}: the instance of {} refers to texture {}, which "
                       "is not stored",
-                      location_, instance.patch_id, texture_id));
+                      location_, which, texture_id));
     }
     if (!rowExists(run_exists, instance.run_id)) {
       throw core::Error(
-          fmt::format("{}: the instance of patch {} belongs to run {}, which is "
+          fmt::format("{}: the instance of {} belongs to run {}, which is "
                       "not stored (call beginRun first)",
-                      location_, instance.patch_id, instance.run_id));
+                      location_, which, instance.run_id));
     }
+    const auto patch_id = std::int64_t{instance.patch_id};
+    const auto version = std::int64_t{instance.version};
+    stored_version.reset();
+    stored_version.bind(1, instance.run_id).bind(2, patch_id);
+    const bool newer_stored =
+        stored_version.step() && !stored_version.isNull(0) && stored_version.int64(0) > version;
+    stored_version.reset();
+    if (newer_stored) continue;  // an older version arriving late: none of its layers is stored
+    delete_older.reset();
+    delete_older.bind(1, instance.run_id).bind(2, patch_id).bind(3, version).run();
     const core::Similarity2& t = instance.transform;
     upsert.reset();
     upsert.bind(1, instance.run_id)
-        .bind(2, std::int64_t{instance.patch_id})
-        .bind(3, std::int64_t{instance.version})
-        .bind(4, texture_id)
-        .bind(5, t.a)
-        .bind(6, t.b)
-        .bind(7, t.tx)
-        .bind(8, t.ty);
-    if (instance.psnr_db) upsert.bind(9, *instance.psnr_db);
-    upsert.bind(10, std::int64_t{instance.reused ? 1 : 0}).run();
+        .bind(2, patch_id)
+        .bind(3, version)
+        .bind(4, std::int64_t{instance.layer})
+        .bind(5, texture_id)
+        .bind(6, t.a)
+        .bind(7, t.b)
+        .bind(8, t.tx)
+        .bind(9, t.ty);
+    if (instance.psnr_db) upsert.bind(10, *instance.psnr_db);
+    upsert.bind(11, std::int64_t{instance.reused ? 1 : 0}).run();
   }
   return ids;
 }

@@ -118,10 +118,16 @@ std::vector<TextureSummary> SqliteStore::textures() const {
 }
 
 std::vector<TextureInstance> SqliteStore::instances(std::optional<std::int64_t> run_id) const {
+  // Schema 1 (open read-only, so not migrated) has no layer column: each patch has only its
+  // texture, layer 0.
+  const char* sql =
+      schema_version_ >= 2
+          ? "SELECT run_id, patch_id, version, layer, texture_id, a, b, tx, ty, psnr_db, reused "
+            "FROM instances WHERE ?1 IS NULL OR run_id = ?1 ORDER BY run_id, patch_id, layer"
+          : "SELECT run_id, patch_id, version, 0, texture_id, a, b, tx, ty, psnr_db, reused "
+            "FROM instances WHERE ?1 IS NULL OR run_id = ?1 ORDER BY run_id, patch_id";
   const ReadLease db(*this);
-  Statement query(*db,
-                  "SELECT run_id, patch_id, version, texture_id, a, b, tx, ty, psnr_db, reused "
-                  "FROM instances WHERE ?1 IS NULL OR run_id = ?1 ORDER BY run_id, patch_id");
+  Statement query(*db, sql);
   if (run_id) query.bind(1, *run_id);
   std::vector<TextureInstance> instances;
   while (query.step()) {
@@ -129,10 +135,11 @@ std::vector<TextureInstance> SqliteStore::instances(std::optional<std::int64_t> 
     i.run_id = query.int64(0);
     i.patch_id = static_cast<int>(query.int64(1));
     i.version = static_cast<int>(query.int64(2));
-    i.texture_id = query.int64(3);
-    i.transform = {query.real(4), query.real(5), query.real(6), query.real(7)};
-    if (!query.isNull(8)) i.psnr_db = query.real(8);
-    i.reused = query.int64(9) != 0;
+    i.layer = static_cast<int>(query.int64(3));
+    i.texture_id = query.int64(4);
+    i.transform = {query.real(5), query.real(6), query.real(7), query.real(8)};
+    if (!query.isNull(9)) i.psnr_db = query.real(9);
+    i.reused = query.int64(10) != 0;
   }
   return instances;
 }

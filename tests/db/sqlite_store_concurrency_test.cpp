@@ -37,7 +37,7 @@ Commit oneTextureCommit(std::int64_t run, int patch, std::uint32_t seed) {
   commit.textures = {makeTexture(seed, 64, 48)};
   commit.textures[0].run_id = run;
   commit.textures[0].source_patch = patch;
-  commit.instances.push_back({run, patch, 1, -1, {}, std::nullopt, false});
+  commit.instances.push_back({run, patch, 1, 0, -1, {}, std::nullopt, false});
   return commit;
 }
 

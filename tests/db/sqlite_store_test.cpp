@@ -104,6 +104,7 @@ void expectFullContents(const TextureStore& store, const Commit& sent,
     EXPECT_EQ(got.run_id, want.run_id);
     EXPECT_EQ(got.patch_id, want.patch_id);
     EXPECT_EQ(got.version, want.version);
+    EXPECT_EQ(got.layer, 0);
     EXPECT_EQ(got.texture_id, ids[i]);
     EXPECT_EQ(got.transform.a, want.transform.a);
     EXPECT_EQ(got.transform.b, want.transform.b);
@@ -186,7 +187,7 @@ TEST(SqliteStore, SamePixelsAreStoredOnceAndKeepTheirId) {
   Commit second;  // the same pixels under another name, twice in one commit, and a new one
   second.textures = {makeTexture(5), makeTexture(5), makeTexture(6)};
   second.textures[0].name = "again.png";
-  second.instances.push_back({run, 1, 1, -2, {}, 40.0, true});
+  second.instances.push_back({run, 1, 1, 0, -2, {}, 40.0, true});
   const auto second_ids = store->commit(second);
   ASSERT_EQ(second_ids.size(), 3u);
   EXPECT_EQ(second_ids[0], first_ids[0]);
@@ -205,7 +206,7 @@ TEST(SqliteStore, NewerPatchVersionReplacesItsInstance) {
   const auto commitVersion = [&](std::int64_t run_id, int version, std::uint32_t seed) {
     Commit commit;
     commit.textures = {makeTexture(seed)};
-    commit.instances.push_back({run_id, 3, version, -1, {}, std::nullopt, false});
+    commit.instances.push_back({run_id, 3, version, 0, -1, {}, std::nullopt, false});
     return store->commit(commit)[0];
   };
   commitVersion(run, 1, 10);
@@ -227,13 +228,13 @@ TEST(SqliteStore, FailedCommitStoresNothingOfIt) {
   const std::int64_t run = store->beginRun("test");
   Commit good;
   good.textures = {makeTexture(20)};
-  good.instances.push_back({run, 1, 1, -1, {}, std::nullopt, false});
+  good.instances.push_back({run, 1, 1, 0, -1, {}, std::nullopt, false});
   store->commit(good);
 
   Commit missing_texture;  // a new texture, then an instance of a texture that does not exist
   missing_texture.textures = {makeTexture(21)};
-  missing_texture.instances.push_back({run, 2, 1, -1, {}, std::nullopt, false});
-  missing_texture.instances.push_back({run, 3, 1, 99999, {}, std::nullopt, false});
+  missing_texture.instances.push_back({run, 2, 1, 0, -1, {}, std::nullopt, false});
+  missing_texture.instances.push_back({run, 3, 1, 0, 99999, {}, std::nullopt, false});
   std::string message = errorOf([&] { store->commit(missing_texture); });
   EXPECT_NE(message.find(path.string()), std::string::npos) << message;
   EXPECT_NE(message.find("99999"), std::string::npos) << message;
@@ -246,7 +247,7 @@ TEST(SqliteStore, FailedCommitStoresNothingOfIt) {
 
   Commit bad_index;
   bad_index.textures = {makeTexture(24)};
-  bad_index.instances.push_back({run, 4, 1, -2, {}, std::nullopt, false});
+  bad_index.instances.push_back({run, 4, 1, 0, -2, {}, std::nullopt, false});
   message = errorOf([&] { store->commit(bad_index); });
   EXPECT_NE(message.find("new texture 1"), std::string::npos) << message;
 
@@ -264,16 +265,18 @@ TEST(SqliteStore, RefusesANewerSchemaWithoutTouchingTheFile) {
   TempFolder dir;
   const auto path = dir / "textures.db";
   openSqliteStore(path)->commit({{makeTexture(30)}, {}});
-  rawExec(path,
-          "UPDATE meta SET value = '3' WHERE key = 'schema_version'; "
-          "PRAGMA user_version = 3;");
+  const std::string newer = std::to_string(kSchemaVersion + 1);
+  rawExec(path, "UPDATE meta SET value = '" + newer +
+                    "' WHERE key = 'schema_version'; PRAGMA user_version = " + newer + ";");
   const std::string before = fileContents(path);
   const auto listing = folderListing(dir.path());
   for (bool read_only : {false, true}) {
     const std::string message =
         errorOf([&] { openSqliteStore(path, {.create = true, .read_only = read_only}); });
     EXPECT_NE(message.find(path.string()), std::string::npos) << message;
-    EXPECT_NE(message.find("newer tessera (schema 3; this build reads up to 1)"), std::string::npos)
+    EXPECT_NE(message.find("newer tessera (schema " + newer + "; this build reads up to " +
+                           std::to_string(kSchemaVersion) + ")"),
+              std::string::npos)
         << message;
   }
   EXPECT_EQ(fileContents(path), before);
@@ -284,10 +287,12 @@ TEST(SqliteStore, RefusesANewerSchemaInTheMetaTable) {
   TempFolder dir;
   const auto path = dir / "textures.db";
   openSqliteStore(path)->commit({{makeTexture(31)}, {}});
-  rawExec(path, "UPDATE meta SET value = '2' WHERE key = 'schema_version'");
+  const std::string newer = std::to_string(kSchemaVersion + 1);
+  rawExec(path, "UPDATE meta SET value = '" + newer + "' WHERE key = 'schema_version'");
   const std::string before = fileContents(path);
   const std::string message = errorOf([&] { openSqliteStore(path); });
-  EXPECT_NE(message.find("newer tessera (schema 2"), std::string::npos) << message;
+  EXPECT_NE(message.find(path.string()), std::string::npos) << message;
+  EXPECT_NE(message.find("newer tessera (schema " + newer), std::string::npos) << message;
   EXPECT_EQ(fileContents(path), before);
 }
 

@@ -50,7 +50,7 @@ struct TextureSummary {
   std::int64_t run_id = 0;
   int source_patch = -1;
   std::string name;
-  std::size_t uses = 0;       // instances that use it, over every run
+  std::size_t uses = 0;       // instances (of any layer) that use it, over every run
   std::size_t png_bytes = 0;  // its stored (compressed) size
 };
 

@@ -14,12 +14,16 @@
 
 namespace tessera::db {
 
-// The schema this build reads and writes. A database with a higher version is refused.
-constexpr int kSchemaVersion = 1;
+// The schema this build writes. A database with a higher version is refused; one of version 1
+// (no instance layers) is migrated when opened for writing, and read as it is when read-only.
+constexpr int kSchemaVersion = 2;
 
 // One commit: new textures, and instances. An instance with texture_id < 0 refers to the new
-// texture at index (-texture_id - 1) of `textures`. An instance replaces any earlier one of
-// the same run and patch (a newer version of the patch), never duplicates it.
+// texture at index (-texture_id - 1) of `textures`. A patch may have several instances, one
+// per layer (0 its texture, 1.. overlays), all of one version; a commit may carry several
+// layers of a patch. A newer version of a patch replaces every stored layer of that run and
+// patch (layers it no longer has are removed); an older one, arriving late, is ignored with
+// all its layers; the same version replaces the stored instance of each layer it carries.
 struct Commit {
   std::vector<TextureRecord> textures;
   std::vector<TextureInstance> instances;
@@ -52,7 +56,7 @@ class TextureStore {
   // The CCVs of textures with id > after_id, ascending (to build or extend a CcvIndex).
   virtual std::vector<CcvEntry> ccvVectors(std::int64_t after_id = 0) const = 0;
   virtual std::vector<TextureSummary> textures() const = 0;
-  // The instances of one run, or of every run.
+  // The instances of one run, or of every run, ordered by run, patch and layer.
   virtual std::vector<TextureInstance> instances(std::optional<std::int64_t> run_id = {}) const = 0;
   virtual std::vector<RunRecord> runs() const = 0;
   virtual StoreStats stats() const = 0;

@@ -14,8 +14,10 @@ namespace tessera::db::internal {
 
 namespace {
 
-// Schema version 1. Blob formats: internal/texture_codec.h. A texture's run_id is NULL for an
-// imported one; its lattice columns are all NULL when it has no lattice.
+// Schema version 2. Blob formats: internal/texture_codec.h. A texture's run_id is NULL for an
+// imported one; its lattice columns are all NULL when it has no lattice. The instances table is
+// in kInstancesColumnsSql. Version 1 had no instances.layer and UNIQUE (run_id, patch_id):
+// migrateSchema brings such a database to 2.
 constexpr const char* kSchemaSql = R"sql(
 CREATE TABLE meta (
   key TEXT PRIMARY KEY,
@@ -44,19 +46,31 @@ CREATE TABLE textures (
   source_patch INTEGER NOT NULL,
   name TEXT NOT NULL
 );
-CREATE TABLE instances (
+)sql";
+
+// The instances table after its name: one row per layer of a patch (0 the patch's texture,
+// 1.. overlays), every layer of a (run, patch) of the same version. New databases and the
+// migration from version 1 both create it from here, so the two cannot drift apart.
+constexpr const char* kInstancesColumnsSql = R"sql( (
   run_id INTEGER NOT NULL REFERENCES runs(id),
   patch_id INTEGER NOT NULL,
   version INTEGER NOT NULL,
+  layer INTEGER NOT NULL DEFAULT 0,
   texture_id INTEGER NOT NULL REFERENCES textures(id),
   a REAL NOT NULL, b REAL NOT NULL, tx REAL NOT NULL, ty REAL NOT NULL,
   psnr_db REAL,
   reused INTEGER NOT NULL,
-  UNIQUE (run_id, patch_id)
+  UNIQUE (run_id, patch_id, layer)
 );
--- textures() counts the uses of every texture.
-CREATE INDEX instances_by_texture ON instances (texture_id);
 )sql";
+
+// textures() counts the uses of every texture.
+constexpr const char* kInstancesIndexSql =
+    "CREATE INDEX instances_by_texture ON instances (texture_id);";
+
+std::string instancesTableSql(const char* name) {
+  return std::string("CREATE TABLE ") + name + kInstancesColumnsSql;
+}
 
 constexpr std::array<char, 16> kSqliteMagic = {'S', 'Q', 'L', 'i', 't', 'e', ' ', 'f',
                                                'o', 'r', 'm', 'a', 't', ' ', '3', '\0'};
@@ -187,15 +201,15 @@ int checkSchema(Connection& connection) {
   }
 }
 
-void createSchema(Connection& connection) {
+int createSchema(Connection& connection) {
   connection.exec("BEGIN IMMEDIATE");
   try {
     if (singleInt(connection, "SELECT count(*) FROM sqlite_master") > 0) {
       connection.exec("COMMIT");
-      checkSchema(connection);
-      return;
+      return checkSchema(connection);
     }
     connection.exec(kSchemaSql);
+    connection.exec((instancesTableSql("instances") + kInstancesIndexSql).c_str());
     // The meta table names the writer and its schema; application_id and user_version repeat
     // them in the file header, where tools (and inspectFile) read them without SQL.
     connection.exec(fmt::format("INSERT INTO meta (key, value) VALUES ('schema_version', '{0}'), "
@@ -205,6 +219,43 @@ void createSchema(Connection& connection) {
                                 kSchemaVersion, kApplicationId)
                         .c_str());
     connection.exec("COMMIT");
+    return kSchemaVersion;
+  } catch (...) {
+    connection.rollbackQuietly();
+    throw;
+  }
+}
+
+int migrateSchema(Connection& connection) {
+  // IMMEDIATE: the version is read again under the write lock, so that of two processes
+  // opening the same version-1 file only the first migrates it.
+  connection.exec("BEGIN IMMEDIATE");
+  try {
+    static_assert(kSchemaVersion == 2, "add the migration to the new schema version here");
+    const int version = checkSchema(connection);
+    if (version == 1) {
+      // SQLite cannot change a UNIQUE constraint in place: the table is built anew (the
+      // order SQLite's documentation gives for other ALTER TABLE changes). Dropping the old
+      // table drops its index too. Nothing refers to instances, so no foreign key moves.
+      connection.exec(
+          (instancesTableSql("instances_v2") +
+           "INSERT INTO instances_v2 (run_id, patch_id, version, layer, texture_id, a, b, tx, "
+           "ty, psnr_db, reused) SELECT run_id, patch_id, version, 0, texture_id, a, b, tx, ty, "
+           "psnr_db, reused FROM instances; "
+           "DROP TABLE instances; "
+           "ALTER TABLE instances_v2 RENAME TO instances; " +
+           kInstancesIndexSql)
+              .c_str());
+      Statement set_version(connection, "UPDATE meta SET value = ? WHERE key = 'schema_version'");
+      set_version.bind(1, std::to_string(kSchemaVersion)).run();
+      connection.exec(fmt::format("PRAGMA user_version = {}", kSchemaVersion).c_str());
+    }
+    connection.exec("COMMIT");
+    return kSchemaVersion;
+  } catch (const core::Error& e) {
+    connection.rollbackQuietly();
+    throw core::Error(fmt::format("{} (while migrating it to schema {}; the database is unchanged)",
+                                  e.what(), kSchemaVersion));
   } catch (...) {
     connection.rollbackQuietly();
     throw;

@@ -28,8 +28,16 @@ void configureWriter(Connection& connection);
 // schema version. Throws core::Error naming the file otherwise (also when it is corrupt).
 int checkSchema(Connection& connection);
 
-// Creates the schema in a new, empty database (the writer connection). When another process
-// created it first, checks that one instead.
-void createSchema(Connection& connection);
+// Creates the schema in a new, empty database (the writer connection); returns its version.
+// When another process created it first, checks that one instead and returns its version
+// (older when an older build created it: then migrateSchema follows).
+int createSchema(Connection& connection);
+
+// Brings a database of an older schema (checked by checkSchema) to kSchemaVersion in one
+// transaction on the writer connection; returns kSchemaVersion. 1 -> 2: instances get a layer
+// (0 for every existing row) and UNIQUE (run_id, patch_id, layer). A failure rolls everything
+// back and throws core::Error naming the file. Never called for a read-only store: that reads
+// the older schema as it is.
+int migrateSchema(Connection& connection);
 
 }  // namespace tessera::db::internal

@@ -58,6 +58,9 @@ class SqliteStore final : public TextureStore {
 
   std::filesystem::path path_;
   std::string location_;
+  // The schema the file had when opened: kSchemaVersion when writable (older ones are migrated),
+  // possibly older when read-only (reads then fill in what the older schema lacks).
+  int schema_version_ = kSchemaVersion;
   std::mutex write_mutex_;
   std::unique_ptr<Connection> writer_;  // null when read-only
   mutable std::mutex pool_mutex_;
