@@ -24,6 +24,7 @@
 #include <chrono>
 #include <cstdint>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <ctime>
 #include <filesystem>
@@ -407,7 +408,7 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   CLI11_PARSE(app, argc, argv);
   omp_set_num_threads(args.threads);
-  tessera::core::initLogging("warn");
+  tessera::core::initLogging(std::getenv("TESSERA_LOG") ? std::getenv("TESSERA_LOG") : "warn");
   o3d::utility::SetVerbosityLevel(o3d::utility::VerbosityLevel::Error);
 
   try {

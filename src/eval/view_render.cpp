@@ -100,14 +100,16 @@ class Rasteriser {
 
  private:
   void drawTriangle(const std::array<Corner, 3>& c, const TextureImage* texture) {
-    std::array<Eigen::Vector2f, 3> p;
+    // In double precision: a wall's long quads, clipped at the near plane, project far off
+    // the image, and float barycentrics then lose the millimetre that keeps an overlay in
+    // front of its wall.
+    std::array<Eigen::Vector2d, 3> p;
     for (std::size_t i = 0; i < 3; ++i) {
-      const Eigen::Vector3f& X = c[i].X_C;
-      p[i] = {static_cast<float>(k_.fx * X.x() / X.z() + k_.cx),
-              static_cast<float>(k_.fy * X.y() / X.z() + k_.cy)};
+      const Eigen::Vector3d X = c[i].X_C.cast<double>();
+      p[i] = {k_.fx * X.x() / X.z() + k_.cx, k_.fy * X.y() / X.z() + k_.cy};
     }
-    const float area = edge(p[0], p[1], p[2]);
-    if (std::abs(area) < 1e-12F) return;
+    const double area = edge(p[0], p[1], p[2]);
+    if (std::abs(area) < 1e-12) return;
     const int x_min =
         std::max(0, static_cast<int>(std::ceil(std::min({p[0].x(), p[1].x(), p[2].x()}))));
     const int x_max = std::min(
@@ -116,24 +118,27 @@ class Rasteriser {
         std::max(0, static_cast<int>(std::ceil(std::min({p[0].y(), p[1].y(), p[2].y()}))));
     const int y_max = std::min(
         view_.rgb.rows - 1, static_cast<int>(std::floor(std::max({p[0].y(), p[1].y(), p[2].y()}))));
-    const std::array<float, 3> inverse_z = {1.0F / c[0].X_C.z(), 1.0F / c[1].X_C.z(),
-                                            1.0F / c[2].X_C.z()};
+    const std::array<double, 3> inverse_z = {1.0 / c[0].X_C.z(), 1.0 / c[1].X_C.z(),
+                                             1.0 / c[2].X_C.z()};
     for (int y = y_min; y <= y_max; ++y) {
       auto* depth = view_.depth.ptr<float>(y);
       auto* rgb = view_.rgb.ptr<cv::Vec3b>(y);
       for (int x = x_min; x <= x_max; ++x) {
-        const Eigen::Vector2f q(static_cast<float>(x), static_cast<float>(y));
+        const Eigen::Vector2d q(x, y);
         // Barycentric coordinates from the signed edge functions (either winding).
-        const float b0 = edge(p[1], p[2], q) / area;
-        const float b1 = edge(p[2], p[0], q) / area;
-        const float b2 = 1.0F - b0 - b1;
-        if (b0 < 0.0F || b1 < 0.0F || b2 < 0.0F) continue;
+        const double b0 = edge(p[1], p[2], q) / area;
+        const double b1 = edge(p[2], p[0], q) / area;
+        const double b2 = 1.0 - b0 - b1;
+        if (b0 < 0.0 || b1 < 0.0 || b2 < 0.0) continue;
         // Perspective-correct interpolation: attributes / z are linear in screen space.
-        const float w0 = b0 * inverse_z[0], w1 = b1 * inverse_z[1], w2 = b2 * inverse_z[2];
-        const float z = 1.0F / (w0 + w1 + w2);
+        const double w0 = b0 * inverse_z[0], w1 = b1 * inverse_z[1], w2 = b2 * inverse_z[2];
+        const auto z = static_cast<float>(1.0 / (w0 + w1 + w2));
         if (depth[x] > 0.0F && depth[x] <= z) continue;
         const Eigen::Vector3f attribute =
-            z * (w0 * c[0].attribute + w1 * c[1].attribute + w2 * c[2].attribute);
+            (static_cast<double>(z) *
+             (w0 * c[0].attribute.cast<double>() + w1 * c[1].attribute.cast<double>() +
+              w2 * c[2].attribute.cast<double>()))
+                .cast<float>();
         Eigen::Vector3f colour = attribute;
         if (texture != nullptr && !sampleTexture(*texture, attribute.x(), attribute.y(), colour)) {
           continue;
@@ -146,7 +151,7 @@ class Rasteriser {
     }
   }
 
-  static float edge(const Eigen::Vector2f& a, const Eigen::Vector2f& b, const Eigen::Vector2f& q) {
+  static double edge(const Eigen::Vector2d& a, const Eigen::Vector2d& b, const Eigen::Vector2d& q) {
     return (b.x() - a.x()) * (q.y() - a.y()) - (b.y() - a.y()) * (q.x() - a.x());
   }
 

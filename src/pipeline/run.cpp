@@ -147,7 +147,7 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
   const match::MatchCascade cascade(config.match);
   StoreCatalog catalog(*store, config.match);
   const MatchStage match_stage(texture_stage, cascade, catalog, config.pattern);
-  CommitStage commit_stage(*store, catalog, cascade, run_id);
+  CommitStage commit_stage(*store, catalog, cascade, config.pattern, run_id);
 
   const auto start = std::chrono::steady_clock::now();
   runGraph(source_stage, tracking_stage, integration_stage, plane_stage, texture_stage, match_stage,

@@ -124,13 +124,37 @@ MatchedPatch MatchStage::process(const PatchJob& job) const {
     matched.description.reset();
     return matched;
   }
-  if (!matched.decision.match && patterns_.enabled) findPattern(matched);
+  if (!matched.decision.match && planner_.config().enabled) findPattern(matched);
   return matched;
 }
 
 CommitStage::CommitStage(db::TextureStore& store, StoreCatalog& catalog,
-                         const match::MatchCascade& cascade, std::int64_t run_id)
-    : store_(store), catalog_(catalog), cascade_(cascade), run_id_(run_id) {}
+                         const match::MatchCascade& cascade,
+                         const pattern::PatternStageConfig& patterns, std::int64_t run_id)
+    : store_(store),
+      catalog_(catalog),
+      cascade_(cascade),
+      planner_(cascade, catalog, patterns),
+      run_id_(run_id) {}
+
+std::vector<match::CandidateVerdict> CommitStage::allVerdicts(const MatchedPatch& matched) const {
+  const match::TextureDescription& query = *matched.description;
+  std::vector<match::CandidateVerdict> verdicts = matched.decision.verdicts;
+  for (const auto& texture : committed_) {
+    if (texture->id <= matched.snapshot_id) continue;
+    const double d = match::ccvDistance(query.ccv.values, texture->description.ccv.values);
+    if (d <= cascade_.config().ccv_max_distance) {
+      verdicts.push_back(cascade_.tryCandidate(query, *texture, d));
+    }
+  }
+  std::sort(verdicts.begin(), verdicts.end(), [](const auto& a, const auto& b) {
+    return a.ccv_distance != b.ccv_distance ? a.ccv_distance < b.ccv_distance : a.id < b.id;
+  });
+  if (verdicts.size() > cascade_.config().max_candidates) {
+    verdicts.resize(cascade_.config().max_candidates);
+  }
+  return verdicts;
+}
 
 std::optional<match::CandidateVerdict> CommitStage::recheck(
     const match::TextureDescription& query, const std::optional<match::CandidateVerdict>& found,
@@ -201,7 +225,7 @@ void CommitStage::planCommit(const MatchedPatch& matched, db::Commit& commit,
                              std::vector<std::shared_ptr<match::StoredTexture>>& fresh,
                              CommitRecord& record) const {
   const texture::PatchBitmap& bitmap = *matched.bitmap;
-  PatternPlan plan = *matched.pattern;
+  LayerPlan plan = *matched.layers;
   bool changed = false;
   std::size_t ignored = 0;
   if (!plan.base_reuse) {  // a pattern committed since the snapshot may show the rest
@@ -216,7 +240,7 @@ void CommitStage::planCommit(const MatchedPatch& matched, db::Commit& commit,
       return a.ccv_distance != b.ccv_distance ? a.ccv_distance < b.ccv_distance
                                               : a.texture->id < b.texture->id;
     });
-    plan.base_reuse = reuseStoredPattern(plan.found, rest, candidates, cascade_.config());
+    plan.base_reuse = reuseStoredPattern(*plan.found, rest, candidates, cascade_.config());
     changed |= plan.base_reuse.has_value();
   }
   for (OverlayMatch& overlay : plan.overlays) {
@@ -241,9 +265,9 @@ void CommitStage::planCommit(const MatchedPatch& matched, db::Commit& commit,
   } else {  // one cell of the pattern, the bitmap at its origin (phase 0)
     db::TextureRecord tile;
     tile.kind = db::TextureKind::kPattern;
-    tile.rgb = plan.found.tile_rgb;
-    tile.mask = plan.found.tile_mask;
-    tile.lattice = plan.found.lattice;
+    tile.rgb = plan.found->tile_rgb;
+    tile.mask = plan.found->tile_mask;
+    tile.lattice = plan.found->lattice;
     tile.texel_m = bitmap.grid.texel_m;
     tile.source_patch = bitmap.id;
     auto described =
@@ -263,11 +287,15 @@ void CommitStage::planCommit(const MatchedPatch& matched, db::Commit& commit,
       layer.psnr_db = match->psnr_db;
       layer.reused = true;
     } else {
+      // Stored opaque (as the database will give it back); described as the crop was seen.
+      db::TextureRecord crop = singleRecord(overlay.description, bitmap.grid.texel_m, bitmap.id);
+      crop.rgb = overlay.opaque_rgb;
+      crop.mask = cv::Mat(crop.rgb.size(), CV_8UC1, cv::Scalar(255));
       auto described = std::make_shared<match::StoredTexture>();
       described->description = overlay.description;
-      layer.texture_id =
-          addTexture(singleRecord(overlay.description, bitmap.grid.texel_m, bitmap.id),
-                     std::move(described), commit, fresh);
+      described->description.rgb = crop.rgb;
+      described->description.mask = crop.mask;
+      layer.texture_id = addTexture(std::move(crop), std::move(described), commit, fresh);
       layer.transform = patchToBox(overlay.box);
       layer.psnr_db.reset();
       layer.reused = layer.texture_id > 0;
@@ -307,6 +335,19 @@ CommitRecord CommitStage::process(MatchedPatch matched) {
     ccv_considered_ += record.ccv_considered;
     ccv_removed_ += record.ccv_removed;
   }
+  // A bitmap that nothing shows whole may be a stored texture with some regions changed (the
+  // same plaster, another poster on it): planned here, where every earlier texture is known,
+  // so that the outcome does not depend on what the matcher's snapshot held.
+  if (!reuse && !matched.layers && cascade_.config().enabled && planner_.config().enabled) {
+    const auto start = std::chrono::steady_clock::now();
+    try {
+      matched.layers = planner_.planPartialReuse(*matched.description, allVerdicts(matched));
+    } catch (const std::exception& e) {  // then stored whole
+      spdlog::warn("patch {} version {}: no layers: {}", bitmap.id, bitmap.version, e.what());
+    }
+    matched.snapshot_id = catalog_.newestId();  // the plan saw every committed texture
+    record.pattern_ms += msSince(start);
+  }
   std::vector<std::shared_ptr<match::StoredTexture>> fresh;  // parallel to commit.textures
   if (reuse) {
     db::TextureInstance instance;
@@ -319,7 +360,7 @@ CommitRecord CommitStage::process(MatchedPatch matched) {
     instance.reused = true;
     record.method = reuse->method;
     commit.instances.push_back(instance);
-  } else if (matched.pattern) {
+  } else if (matched.layers) {
     planCommit(matched, commit, fresh, record);
   } else {
     db::TextureInstance instance;

@@ -35,12 +35,12 @@ RunSummary runOffice(const fs::path& out, int threads, std::optional<std::string
   return runPipeline(source, loadRunConfig(std::nullopt), options);
 }
 
-// (patch, version, texture, reused) of every instance, and the stored textures' content keys.
-using Instances = std::set<std::tuple<int, int, std::int64_t, bool>>;
+// (patch, version, layer, texture, reused) of every instance.
+using Instances = std::set<std::tuple<int, int, int, std::int64_t, bool>>;
 Instances instancesOf(const fs::path& db_path) {
   Instances instances;
   for (const db::TextureInstance& i : db::openSqliteStore(db_path, {false, true})->instances()) {
-    instances.insert({i.patch_id, i.version, i.texture_id, i.reused});
+    instances.insert({i.patch_id, i.version, i.layer, i.texture_id, i.reused});
   }
   return instances;
 }
@@ -114,6 +114,11 @@ TEST(TextureReuse, TheSecondTableReusesTheFirstAndOneOrTwoThreadsStoreTheSame) {
     }
   }
   EXPECT_TRUE(poster);
+  // The two plaster walls show the same plaster: the later one reuses the earlier one's
+  // texture, with what differs (the blackboard, the posters' places) as overlays.
+  ASSERT_TRUE(texture_of_plane.count("wall_west") && texture_of_plane.count("wall_east"));
+  EXPECT_EQ(texture_of_plane["wall_west"], texture_of_plane["wall_east"]);
+  EXPECT_GE(two.overlays, 4u);
   std::ifstream obj(root / "two/patches.obj");
   const std::string text((std::istreambuf_iterator<char>(obj)), std::istreambuf_iterator<char>());
   EXPECT_NE(text.find(fmt::format("o patch_{}_v", *north_patch)), std::string::npos);

@@ -19,8 +19,8 @@ struct OverlayConfig {
 };
 
 struct Overlays {
-  cv::Mat unexplained;           // CV_8UC1: 255 in a blob (holes filled, grown 2 texels)
-  std::vector<cv::Rect> blobs;   // bounding boxes, largest first
+  cv::Mat unexplained;             // CV_8UC1: 255 in a blob (holes filled, grown 2 texels)
+  std::vector<cv::Rect> blobs;     // bounding boxes, largest first
   double unexplained_share = 0.0;  // of the compared texels
 };
 

@@ -73,7 +73,7 @@ struct RunSummary {
   std::string db;
   std::size_t textures_stored = 0;  // new textures this run stored (versions included)
   std::size_t patterns_stored = 0;
-  std::size_t overlays = 0;  // overlay layers the map draws on patterned patches
+  std::size_t overlays = 0;          // overlay layers the map draws on patterned patches
   std::size_t textured_patches = 0;  // finalized patches with a committed instance
   std::size_t reuses = 0;            // ... of which reuse a texture stored before them
   std::size_t commit_failures = 0;

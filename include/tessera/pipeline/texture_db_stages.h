@@ -37,24 +37,28 @@ struct PatchJob {
   SteadyTime finalized_at;
 };
 
-// A box of a pattern patch's bitmap that the tiling does not explain (a poster on a brick
-// wall), matched like any bitmap: drawn on top of the pattern from a texture it reuses, or
-// from its own crop.
+// A region of a bitmap that its base layer does not explain (a poster on a brick wall),
+// matched like any bitmap: drawn on top of the base from a texture it reuses, or from its own
+// crop.
 struct OverlayMatch {
   cv::Rect box;                           // in bitmap texels
   match::TextureDescription description;  // the crop, with the bitmap's mask
-  match::MatchDecision decision;          // the crop's texel -> a stored texture, if any
+  // The crop as stored: its empty texels inpainted, so that the overlay hides the base over
+  // its whole box (the base would show another surface through them).
+  cv::Mat opaque_rgb;
+  match::MatchDecision decision;  // the crop's texel -> a stored texture, if any
 };
 
-// A bitmap that matched nothing, shown as a periodic pattern with its overlays on top.
-struct PatternPlan {
-  pattern::Pattern found;  // the new tile and its lattice, in bitmap texels
-  // The bitmap without its overlay boxes (only when there are overlays), and a stored
-  // pattern that shows it (then reused instead of the new tile).
+// A bitmap that matched nothing, shown in layers: a base (a new periodic pattern, or a
+// stored texture that shows all but some regions of it) with those regions as overlays.
+struct LayerPlan {
+  std::optional<pattern::Pattern> found;  // a new pattern, in bitmap texels
+  // The bitmap without its overlay regions (when there are some), and a stored texture that
+  // shows it (then reused instead of the new pattern; always there without one).
   std::optional<match::TextureDescription> base;
   std::optional<match::CandidateVerdict> base_reuse;
   std::vector<OverlayMatch> overlays;
-  match::Fidelity fidelity;  // of the pattern and overlays together, over the whole bitmap
+  match::Fidelity fidelity;  // of all layers together, over the whole bitmap
 };
 
 // A patch's bitmap, its description and the matcher's decision.
@@ -66,9 +70,9 @@ struct MatchedPatch {
   std::optional<texture::PatchBitmap> bitmap;  // nothing when it could not be built
   std::optional<match::TextureDescription> description;
   match::MatchDecision decision;
-  // A bitmap that matched nothing: its periodic pattern with its overlays, when together they
-  // show it as faithfully as a reuse must (then stored instead of the bitmap).
-  std::optional<PatternPlan> pattern;
+  // A bitmap that matched nothing: its layers, when together they show it as faithfully as a
+  // reuse must (then stored instead of the bitmap).
+  std::optional<LayerPlan> layers;
   double pattern_ms = 0.0;
   double describe_ms = 0.0;      // CCV and features of the new bitmap
   std::int64_t snapshot_id = 0;  // the newest texture the matcher could see
@@ -117,25 +121,55 @@ class StoreCatalog : public match::TextureCatalog {
 std::shared_ptr<const match::StoredTexture> storedTextureOf(const db::TextureRecord& record,
                                                             const match::MatchConfig& config);
 
+// Plans a bitmap's layers (layer_plan.cpp). Thread-safe; the catalog is read as it is (the
+// match stage holds its read lock, the commit stage is its only writer).
+class LayerPlanner {
+ public:
+  LayerPlanner(const match::MatchCascade& cascade, const StoreCatalog& catalog,
+               const pattern::PatternStageConfig& patterns)
+      : cascade_(cascade), catalog_(catalog), patterns_(patterns) {}
+  const pattern::PatternStageConfig& config() const { return patterns_; }
+
+  // A periodic pattern found in the bitmap: its base (a stored pattern the explained part
+  // reuses, else the new tile) and its overlays.
+  std::optional<LayerPlan> planPattern(const match::TextureDescription& bitmap,
+                                       pattern::Pattern found) const;
+  // The candidate that covers most of the bitmap, best first among `verdicts` (placed but
+  // refused for fidelity), as the base, and what it does not explain as overlays.
+  std::optional<LayerPlan> planPartialReuse(
+      const match::TextureDescription& bitmap,
+      const std::vector<match::CandidateVerdict>& verdicts) const;
+
+ private:
+  std::vector<OverlayMatch> matchOverlays(const match::TextureDescription& bitmap,
+                                          const std::vector<cv::Rect>& boxes) const;
+  std::optional<LayerPlan> judged(const match::TextureDescription& bitmap, LayerPlan plan) const;
+
+  const match::MatchCascade& cascade_;
+  const StoreCatalog& catalog_;
+  pattern::PatternStageConfig patterns_;
+};
+
 // Builds each patch's bitmap, describes it and matches it; a bitmap that matches nothing is
-// analysed for a periodic pattern (thread-safe: many at once).
+// analysed for a periodic pattern (thread-safe: many at once). Partial reuses are planned at
+// commit, where every earlier texture is known.
 class MatchStage {
  public:
   MatchStage(const TextureStage& textures, const match::MatchCascade& cascade,
              const StoreCatalog& catalog, const pattern::PatternStageConfig& patterns)
-      : textures_(textures), cascade_(cascade), catalog_(catalog), patterns_(patterns) {}
+      : textures_(textures),
+        cascade_(cascade),
+        catalog_(catalog),
+        planner_(cascade, catalog, patterns) {}
   MatchedPatch process(const PatchJob& job) const;
 
  private:
-  // pattern_stage.cpp
-  void findPattern(MatchedPatch& matched) const;
-  std::optional<PatternPlan> planPattern(const match::TextureDescription& bitmap,
-                                         pattern::Pattern found) const;
+  void findPattern(MatchedPatch& matched) const;  // layer_plan.cpp
 
   const TextureStage& textures_;
   const match::MatchCascade& cascade_;
   const StoreCatalog& catalog_;
-  pattern::PatternStageConfig patterns_;
+  LayerPlanner planner_;
 };
 
 // A stored pattern the cascade's prefilter let through, with its CCV distance.
@@ -155,9 +189,10 @@ std::optional<match::CandidateVerdict> reuseStoredPattern(
 // Patch texel -> texel of the crop `box` (an overlay's own texture).
 core::Similarity2 patchToBox(const cv::Rect& box);
 
-// How faithfully a pattern (a new tile, or the stored pattern `base_reuse` names) with its
-// overlays (each a reuse, or its own crop) shows `bitmap`; stored textures from `catalog`.
-match::Fidelity layeredFidelity(const match::TextureDescription& bitmap, const PatternPlan& plan,
+// How faithfully a plan's layers (the new pattern or the stored texture `base_reuse` names,
+// then the overlays, each a reuse or its own crop) show `bitmap`; stored textures from
+// `catalog`.
+match::Fidelity layeredFidelity(const match::TextureDescription& bitmap, const LayerPlan& plan,
                                 const match::TextureCatalog& catalog);
 
 // What one commit decided, for stats.jsonl.
@@ -176,7 +211,7 @@ struct CommitRecord {
 class CommitStage {
  public:
   CommitStage(db::TextureStore& store, StoreCatalog& catalog, const match::MatchCascade& cascade,
-              std::int64_t run_id);
+              const pattern::PatternStageConfig& patterns, std::int64_t run_id);
 
   CommitRecord process(MatchedPatch matched);
 
@@ -200,7 +235,10 @@ class CommitStage {
   std::optional<match::CandidateVerdict> recheck(
       const match::TextureDescription& query, const std::optional<match::CandidateVerdict>& found,
       std::int64_t snapshot_id, std::size_t& newer_passing) const;
-  // A pattern plan's textures and instances (layer 0 the pattern, then the overlays) into
+  // The verdicts on the max_candidates textures nearest in CCV among all stored so far: the
+  // matcher's, and the cascade's on textures committed since its snapshot.
+  std::vector<match::CandidateVerdict> allVerdicts(const MatchedPatch& matched) const;
+  // A layer plan's textures and instances (layer 0 the base, then the overlays) into
   // `commit`; new textures' descriptions into `fresh` (parallel to commit.textures).
   void planCommit(const MatchedPatch& matched, db::Commit& commit,
                   std::vector<std::shared_ptr<match::StoredTexture>>& fresh,
@@ -214,6 +252,7 @@ class CommitStage {
   db::TextureStore& store_;
   StoreCatalog& catalog_;
   const match::MatchCascade& cascade_;
+  LayerPlanner planner_;
   std::int64_t run_id_;
   std::vector<std::shared_ptr<const match::StoredTexture>> committed_;  // this run, ascending id
   std::map<int, std::vector<db::TextureInstance>> instances_;

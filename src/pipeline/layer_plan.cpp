@@ -1,0 +1,235 @@
+// The match stage's layer step: a bitmap that matched nothing is shown in layers when that
+// is as faithful as a reuse. Its base is a periodic pattern (new, or a stored one aligned
+// through the two lattices), or a stored texture the cascade placed but could not accept
+// because some regions differ (a blackboard on one wall, posters on the other). Regions the
+// base does not explain become overlays, matched against the database like any bitmap.
+#include <algorithm>
+
+#include <spdlog/spdlog.h>
+#include <opencv2/core.hpp>
+#include <opencv2/photo.hpp>
+
+#include "tessera/match/pattern_alignment.h"
+#include "tessera/pattern/overlays.h"
+#include "tessera/pipeline/texture_db_stages.h"
+
+namespace tessera::pipeline {
+
+namespace {
+
+// Overlay blobs worth their own texture, as boxes grown by the margin; boxes that then
+// overlap are merged.
+std::vector<cv::Rect> overlayBoxes(const std::vector<cv::Rect>& blobs, const cv::Size& size,
+                                   const pattern::PatternStageConfig& config) {
+  const int m = config.overlay_margin_px;
+  const cv::Rect bitmap(0, 0, size.width, size.height);
+  std::vector<cv::Rect> boxes;
+  for (const cv::Rect& blob : blobs) {
+    if (std::min(blob.width, blob.height) < config.min_overlay_side_px ||
+        blob.area() < config.min_overlay_area_px) {
+      continue;
+    }
+    boxes.push_back(cv::Rect(blob.x - m, blob.y - m, blob.width + 2 * m, blob.height + 2 * m) &
+                    bitmap);
+  }
+  for (bool merged = true; merged;) {
+    merged = false;
+    for (std::size_t i = 0; i < boxes.size() && !merged; ++i) {
+      for (std::size_t j = i + 1; j < boxes.size() && !merged; ++j) {
+        if ((boxes[i] & boxes[j]).area() == 0) continue;
+        boxes[i] |= boxes[j];
+        boxes.erase(boxes.begin() + static_cast<std::ptrdiff_t>(j));
+        merged = true;
+      }
+    }
+  }
+  return boxes;
+}
+
+double msSince(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
+      .count();
+}
+
+}  // namespace
+
+std::optional<match::CandidateVerdict> reuseStoredPattern(
+    const pattern::Pattern& found, const match::TextureDescription& shown,
+    const std::vector<PatternCandidate>& candidates, const match::MatchConfig& config) {
+  for (const PatternCandidate& candidate : candidates) {
+    const match::StoredTexture& stored = *candidate.texture;
+    match::CandidateVerdict verdict;
+    verdict.id = stored.id;
+    verdict.ccv_distance = candidate.ccv_distance;
+    verdict.method = "lattice";
+    verdict.transform = match::alignPattern(found.tile_rgb, found.tile_mask, found.lattice, stored);
+    if (!verdict.transform) continue;
+    verdict.transform = match::refineAlignment(shown.rgb, shown.mask, stored, *verdict.transform);
+    const match::Fidelity fidelity = match::measureFidelity(
+        shown.rgb, shown.mask,
+        match::renderStored(stored, *verdict.transform, shown.rgb.cols, shown.rgb.rows));
+    verdict.psnr_db = fidelity.psnr_db;
+    verdict.coverage = fidelity.coverage;
+    if (fidelity.psnr_db >= config.min_psnr_db && fidelity.coverage >= config.min_coverage) {
+      verdict.accepted = true;
+      return verdict;
+    }
+  }
+  return std::nullopt;
+}
+
+core::Similarity2 patchToBox(const cv::Rect& box) {
+  return {1.0, 0.0, -static_cast<double>(box.x), -static_cast<double>(box.y)};
+}
+
+match::Fidelity layeredFidelity(const match::TextureDescription& bitmap, const LayerPlan& plan,
+                                const match::TextureCatalog& catalog) {
+  const int w = bitmap.rgb.cols, h = bitmap.rgb.rows;
+  match::Rendered shown;
+  const auto reused = plan.base_reuse ? catalog.load(plan.base_reuse->id) : nullptr;
+  if (reused) {
+    shown = match::renderStored(*reused, *plan.base_reuse->transform, w, h);
+  } else if (plan.found) {
+    shown = match::renderPattern(plan.found->tile_rgb, plan.found->tile_mask, plan.found->lattice,
+                                 {}, w, h);
+  } else {
+    return {};
+  }
+  for (const OverlayMatch& overlay : plan.overlays) {
+    const cv::Rect& box = overlay.box;
+    const auto& match = overlay.decision.match;
+    const auto stored = match ? catalog.load(match->id) : nullptr;
+    if (stored) {  // the reused texture, through the crop's transform
+      const match::Rendered part =
+          match::renderStored(*stored, *match->transform, box.width, box.height);
+      part.rgb.copyTo(shown.rgb(box), part.covered);
+      cv::Mat covered = shown.covered(box);
+      covered |= part.covered;
+    } else {  // its own pixels
+      overlay.description.rgb.copyTo(shown.rgb(box), overlay.description.mask);
+      cv::Mat covered = shown.covered(box);
+      covered |= overlay.description.mask;
+    }
+  }
+  return match::measureFidelity(bitmap.rgb, bitmap.mask, shown);
+}
+
+void MatchStage::findPattern(MatchedPatch& matched) const {
+  const match::TextureDescription& bitmap = *matched.description;
+  try {
+    pattern::PatternAnalysis analysis =
+        pattern::analysePattern(bitmap.rgb, bitmap.mask, planner_.config().extractor);
+    matched.pattern_ms = analysis.ms;
+    if (!analysis.pattern) return;
+    const auto start = std::chrono::steady_clock::now();
+    matched.layers = planner_.planPattern(bitmap, std::move(*analysis.pattern));
+    matched.pattern_ms += msSince(start);
+  } catch (const std::exception& e) {  // the bitmap is then stored as it is
+    spdlog::warn("patch {} version {}: no layers: {}", matched.bitmap->id, matched.bitmap->version,
+                 e.what());
+    matched.layers.reset();
+  }
+}
+
+std::vector<OverlayMatch> LayerPlanner::matchOverlays(const match::TextureDescription& bitmap,
+                                                      const std::vector<cv::Rect>& boxes) const {
+  std::vector<OverlayMatch> overlays;
+  for (const cv::Rect& box : boxes) {
+    // The whole box: an object's plain background may pass for the base's colours texel by
+    // texel, yet it is the object's.
+    OverlayMatch overlay;
+    overlay.box = box;
+    overlay.description = match::describeTexture(bitmap.rgb(box).clone(), bitmap.mask(box).clone(),
+                                                 cascade_.config());
+    const cv::Mat empty = overlay.description.mask == 0;
+    if (cv::countNonZero(empty) > 0) {
+      cv::inpaint(overlay.description.rgb, empty, overlay.opaque_rgb, 3.0, cv::INPAINT_TELEA);
+    } else {
+      overlay.opaque_rgb = overlay.description.rgb;
+    }
+    overlay.decision = cascade_.match(overlay.description, catalog_);
+    overlays.push_back(std::move(overlay));
+  }
+  return overlays;
+}
+
+std::optional<LayerPlan> LayerPlanner::planPattern(const match::TextureDescription& bitmap,
+                                                   pattern::Pattern found) const {
+  LayerPlan plan;
+  const std::vector<cv::Rect> boxes = overlayBoxes(found.overlays, bitmap.rgb.size(), patterns_);
+  if (!boxes.empty()) {
+    cv::Mat base_mask = bitmap.mask.clone();
+    for (const cv::Rect& box : boxes) base_mask(box).setTo(0);
+    plan.base = match::describeTexture(bitmap.rgb, base_mask, cascade_.config());
+  }
+  const auto lock = catalog_.readLock();
+  // The explained rest may be a pattern the database has (the other brick wall's).
+  std::vector<PatternCandidate> candidates;
+  const match::TextureDescription& rest = plan.base ? *plan.base : bitmap;
+  for (const match::CcvNeighbour& n : catalog_.nearest(
+           rest.ccv.values, cascade_.config().ccv_max_distance, cascade_.config().max_candidates)) {
+    if (auto stored = catalog_.load(n.id); stored && stored->pattern) {
+      candidates.push_back({std::move(stored), n.distance});
+    }
+  }
+  plan.base_reuse = reuseStoredPattern(found, rest, candidates, cascade_.config());
+  plan.overlays = matchOverlays(bitmap, boxes);
+  plan.found = std::move(found);
+  return judged(bitmap, std::move(plan));
+}
+
+std::optional<LayerPlan> LayerPlanner::planPartialReuse(
+    const match::TextureDescription& bitmap,
+    const std::vector<match::CandidateVerdict>& verdicts) const {
+  // The candidate the cascade placed over most of the bitmap and refused for its fidelity.
+  const match::CandidateVerdict* placed = nullptr;
+  for (const match::CandidateVerdict& verdict : verdicts) {
+    if (verdict.transform && verdict.coverage >= cascade_.config().min_coverage &&
+        (placed == nullptr || verdict.psnr_db > placed->psnr_db)) {
+      placed = &verdict;
+    }
+  }
+  if (placed == nullptr) return std::nullopt;
+  const auto stored = catalog_.load(placed->id);
+  if (!stored || stored->pattern) return std::nullopt;
+  const match::Rendered render =
+      match::renderStored(*stored, *placed->transform, bitmap.rgb.cols, bitmap.rgb.rows);
+  // Texels the render does not reach count as unexplained too; those outside the bitmap's
+  // mask count nothing (the error is blurred before its threshold).
+  cv::Mat error = pattern::colourError(bitmap.rgb, render.rgb);
+  error.setTo(255.0f, ~render.covered & bitmap.mask);
+  error.setTo(0.0f, ~bitmap.mask);
+  const pattern::PatternConfig& limits = patterns_.extractor;
+  const pattern::Overlays regions = pattern::findOverlays(
+      error, bitmap.mask, {limits.overlay_sigmas, limits.min_overlay_error, limits.min_overlay_px});
+  if (regions.blobs.empty() || regions.unexplained_share > limits.max_overlay_share) {
+    spdlog::debug("texture {} placed at {:.1f} dB leaves {:.0f} % of a {}x{} bitmap unexplained",
+                  placed->id, placed->psnr_db, 100.0 * regions.unexplained_share, bitmap.rgb.cols,
+                  bitmap.rgb.rows);
+    return std::nullopt;
+  }
+  LayerPlan plan;
+  plan.base_reuse = *placed;
+  plan.base_reuse->method += "+overlays";
+  plan.overlays = matchOverlays(bitmap, overlayBoxes(regions.blobs, bitmap.rgb.size(), patterns_));
+  return judged(bitmap, std::move(plan));
+}
+
+std::optional<LayerPlan> LayerPlanner::judged(const match::TextureDescription& bitmap,
+                                              LayerPlan plan) const {
+  plan.fidelity = layeredFidelity(bitmap, plan, catalog_);
+  const match::MatchConfig& limits = cascade_.config();
+  if (plan.fidelity.psnr_db >= limits.min_psnr_db &&
+      plan.fidelity.coverage >= limits.min_coverage) {
+    return plan;
+  }
+  spdlog::debug(
+      "{} with {} overlays shows a {}x{} bitmap at {:.1f} dB over {:.0f} % of it, short of a "
+      "reuse's {:.1f} dB over {:.0f} %: stored whole",
+      plan.base_reuse ? fmt::format("texture {}", plan.base_reuse->id) : "a new pattern",
+      plan.overlays.size(), bitmap.rgb.cols, bitmap.rgb.rows, plan.fidelity.psnr_db,
+      100.0 * plan.fidelity.coverage, limits.min_psnr_db, 100.0 * limits.min_coverage);
+  return std::nullopt;
+}
+
+}  // namespace tessera::pipeline
