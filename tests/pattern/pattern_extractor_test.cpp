@@ -1,4 +1,5 @@
 #include "tessera/pattern/pattern_extractor.h"
+#include "tessera/pattern/overlays.h"
 
 #include <cmath>
 #include <filesystem>
@@ -175,6 +176,35 @@ TEST(PatternExtractor, RefusesWhatItCannotRead) {
       analysePattern(cv::Mat(64, 64, CV_8UC3, cv::Scalar(90, 90, 90)), {});
   EXPECT_FALSE(plain.pattern);
   EXPECT_FALSE(plain.reason.empty());
+}
+
+// A poster pasted on a noisy render is one overlay whose box is the poster's, and the noise
+// alone leaves nothing unexplained.
+TEST(Overlays, APastedRectangleIsOneBlobWithItsBox) {
+  const cv::Mat wall =
+      testing::tiling(testing::randomTile(30, 20, 8), {{30.0, 0.0}, {15.0, 20.0}}, 300, 200);
+  cv::Mat seen = wall.clone();
+  cv::Mat noise(wall.size(), CV_16SC3);
+  cv::RNG(3).fill(noise, cv::RNG::NORMAL, 0.0, 3.0);
+  seen.convertTo(seen, CV_16SC3);
+  seen += noise;
+  seen.convertTo(seen, CV_8UC3);
+  const cv::Mat all(wall.size(), CV_8UC1, cv::Scalar(255));
+  EXPECT_TRUE(findOverlays(colourError(seen, wall), all, {}).blobs.empty());
+
+  const cv::Rect poster(120, 40, 60, 90);
+  cv::Mat poster_pixels = seen(poster);
+  cv::randu(poster_pixels, cv::Scalar::all(0), cv::Scalar::all(255));
+  cv::GaussianBlur(poster_pixels, poster_pixels, {9, 9}, 3.0);
+  seen(cv::Rect(130, 50, 40, 70)).setTo(cv::Scalar(250, 250, 240));  // a plain middle
+  const Overlays found = findOverlays(colourError(seen, wall), all, {});
+  ASSERT_EQ(found.blobs.size(), 1u);
+  EXPECT_LE(std::abs(found.blobs[0].x - poster.x), 4);
+  EXPECT_LE(std::abs(found.blobs[0].y - poster.y), 4);
+  EXPECT_LE(std::abs(found.blobs[0].br().x - poster.br().x), 4);
+  EXPECT_LE(std::abs(found.blobs[0].br().y - poster.br().y), 4);
+  const double share = static_cast<double>(poster.area()) / static_cast<double>(wall.total());
+  EXPECT_NEAR(found.unexplained_share, share, 0.25 * share);
 }
 
 }  // namespace
