@@ -1,8 +1,9 @@
-// The match stage's layer step: a bitmap that matched nothing is shown in layers when that
-// is as faithful as a reuse. Its base is a periodic pattern (new, or a stored one aligned
-// through the two lattices), or a stored texture the cascade placed but could not accept
-// because some regions differ (a blackboard on one wall, posters on the other). Regions the
-// base does not explain become overlays, matched against the database like any bitmap.
+// Layers for a bitmap that matched nothing, kept when they show it as faithfully as a reuse.
+// Its base is a periodic pattern (new, or a stored one aligned through the two lattices;
+// planned in the match stage), or a stored texture the cascade placed but could not accept
+// because some regions differ (a blackboard on one wall, posters on the other; planned in the
+// commit stage). Regions the base does not explain become overlays, matched against the
+// database like any bitmap.
 #include <algorithm>
 
 #include <spdlog/spdlog.h>
