@@ -221,7 +221,7 @@ db::TextureRecord singleRecord(const match::TextureDescription& description, dou
 
 }  // namespace
 
-void CommitStage::planCommit(const MatchedPatch& matched, db::Commit& commit,
+bool CommitStage::planCommit(const MatchedPatch& matched, db::Commit& commit,
                              std::vector<std::shared_ptr<match::StoredTexture>>& fresh,
                              CommitRecord& record) const {
   const texture::PatchBitmap& bitmap = *matched.bitmap;
@@ -250,7 +250,13 @@ void CommitStage::planCommit(const MatchedPatch& matched, db::Commit& commit,
     overlay.decision.match = found;
   }
   // Then the fidelity is that of what is committed; a plan that lost it stores the bitmap.
-  if (changed) plan.fidelity = layeredFidelity(*matched.description, plan, catalog_);
+  if (changed) {
+    plan.fidelity = layeredFidelity(*matched.description, plan, catalog_);
+    if (plan.fidelity.psnr_db < cascade_.config().min_psnr_db ||
+        plan.fidelity.coverage < cascade_.config().min_coverage) {
+      return false;
+    }
+  }
 
   db::TextureInstance base;
   base.run_id = run_id_;
@@ -302,6 +308,7 @@ void CommitStage::planCommit(const MatchedPatch& matched, db::Commit& commit,
     }
     commit.instances.push_back(layer);
   }
+  return true;
 }
 
 CommitRecord CommitStage::process(MatchedPatch matched) {
@@ -360,8 +367,8 @@ CommitRecord CommitStage::process(MatchedPatch matched) {
     instance.reused = true;
     record.method = reuse->method;
     commit.instances.push_back(instance);
-  } else if (matched.layers) {
-    planCommit(matched, commit, fresh, record);
+  } else if (matched.layers && planCommit(matched, commit, fresh, record)) {
+    // stored in layers
   } else {
     db::TextureInstance instance;
     instance.run_id = run_id_;

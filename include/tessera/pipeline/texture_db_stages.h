@@ -239,8 +239,10 @@ class CommitStage {
   // matcher's, and the cascade's on textures committed since its snapshot.
   std::vector<match::CandidateVerdict> allVerdicts(const MatchedPatch& matched) const;
   // A layer plan's textures and instances (layer 0 the base, then the overlays) into
-  // `commit`; new textures' descriptions into `fresh` (parallel to commit.textures).
-  void planCommit(const MatchedPatch& matched, db::Commit& commit,
+  // `commit`; new textures' descriptions into `fresh` (parallel to commit.textures). False,
+  // with nothing added, when textures committed since the matcher's snapshot changed the plan
+  // and it no longer shows the bitmap faithfully.
+  bool planCommit(const MatchedPatch& matched, db::Commit& commit,
                   std::vector<std::shared_ptr<match::StoredTexture>>& fresh,
                   CommitRecord& record) const;
   // A new texture for `commit`, or the id of one with the same pixels already stored
