@@ -76,9 +76,11 @@ int runCommand(const RunArguments& args) {
 
     const pipeline::RunSummary summary = pipeline::runPipeline(*source, config, run_options);
     progress.finish();
-    spdlog::info("{} frames in {:.2f} s ({:.1f} frames/s), {} integrated, {} bad, {} without pose",
-                 summary.frames, summary.wall_s, summary.fps, summary.frames_integrated,
-                 summary.frames_bad, summary.frames_without_pose);
+    spdlog::info(
+        "{} frames in {:.2f} s ({:.1f} frames/s), {} fused, {} posed between fused ones, {} bad, "
+        "{} without pose",
+        summary.frames, summary.wall_s, summary.fps, summary.frames_integrated,
+        summary.frames_between_fused, summary.frames_bad, summary.frames_without_pose);
     if (summary.poses == "track") {
       spdlog::info("tracking: {} frames lost, {} restarts", summary.tracking_losses,
                    summary.tracking_restarts);

@@ -35,6 +35,7 @@ void readConfig(const core::ConfigSection& section, TsdfConfig& config) {
   section.read("max_depth_m", config.max_depth_m);
   section.read("block_resolution", config.block_resolution);
   section.read("integration_scale", config.integration_scale);
+  section.read("integrate_every_n_frames", config.integrate_every_n_frames);
   section.read("release_distance_m", config.release_distance_m);
   if (config.voxel_size_m <= 0.0 || config.truncation_m < config.voxel_size_m) {
     throw core::ConfigError(
@@ -48,6 +49,9 @@ void readConfig(const core::ConfigSection& section, TsdfConfig& config) {
   }
   if (config.integration_scale < 1 || config.integration_scale > 8) {
     throw core::ConfigError("tsdf: integration_scale must be between 1 and 8");
+  }
+  if (config.integrate_every_n_frames < 1) {
+    throw core::ConfigError("tsdf: integrate_every_n_frames must be at least 1");
   }
   if (config.release_distance_m < 0.0) {
     throw core::ConfigError("tsdf: release_distance_m must be 0 (keep all) or positive");

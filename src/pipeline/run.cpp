@@ -166,6 +166,7 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
   summary.frames_without_pose = integration_stage.framesSkipped();
   summary.holdout_every = options.holdout_every;
   summary.frames_held_out = integration_stage.framesHeldOut();
+  summary.frames_between_fused = integration_stage.framesBetweenFused();
   summary.poses = options.poses == PoseSource::kTrack ? "track" : "gt";
   summary.tracking_losses = tracking_stage.trackingLosses();
   summary.tracking_restarts = tracking_stage.trackingRestarts();
@@ -238,6 +239,7 @@ void writeReport(const RunSummary& summary, const std::filesystem::path& path) {
       {"frames_without_pose", summary.frames_without_pose},
       {"holdout_every", summary.holdout_every},
       {"frames_held_out", summary.frames_held_out},
+      {"frames_between_fused", summary.frames_between_fused},
       {"poses", summary.poses},
       {"tracking_losses", summary.tracking_losses},
       {"tracking_restarts", summary.tracking_restarts},

@@ -120,6 +120,22 @@ IntegrationStage::IntegrationStage(const fusion::TsdfConfig& tsdf, int thread_ca
   map_.setThreadCap(thread_cap);
 }
 
+bool IntegrationStage::wantsFrame(const core::Isometry& T_W_C) {
+  ++posed_since_fused_;
+  bool wanted = !last_fused_pose_ || posed_since_fused_ >= map_.config().integrate_every_n_frames;
+  if (!wanted) {
+    // A frame far from the last one fused (sparse keyframes, dropped frames) always is.
+    const core::Isometry motion = last_fused_pose_->inverse() * T_W_C;
+    const double angle_deg = Eigen::AngleAxisd(motion.linear()).angle() * 180.0 / M_PI;
+    wanted = motion.translation().norm() > 0.05 || angle_deg > 3.0;
+  }
+  if (wanted) {
+    last_fused_pose_ = T_W_C;
+    posed_since_fused_ = 0;
+  }
+  return wanted;
+}
+
 FusedFrame IntegrationStage::process(TrackedFrame tracked) {
   FusedFrame fused;
   fused.T_W_C = tracked.T_W_C;
@@ -134,6 +150,13 @@ FusedFrame IntegrationStage::process(TrackedFrame tracked) {
     fused.held_out = true;
     if (fused.T_W_C) fused.skip_reason = "held out for evaluation (--holdout-every)";
     ++held_out_;
+    fused.tsdf_bytes = map_.memoryBytes();
+    fused.frame = std::move(tracked.frame);
+    return fused;
+  }
+  if (fused.T_W_C && !wantsFrame(*fused.T_W_C)) {
+    fused.between_fused = true;
+    ++between_fused_;
     fused.tsdf_bytes = map_.memoryBytes();
     fused.frame = std::move(tracked.frame);
     return fused;
@@ -211,7 +234,7 @@ FusedFrame PlaneStage::process(FusedFrame fused) {
     fused.patches_finalized = map_.finalizedCount();
     return fused;
   }
-  if (fused.held_out) {
+  if (fused.held_out || fused.between_fused) {
     // Only the pose, corrected as the frames around it are; the map does not see the frame.
     if (fused.T_W_C) fused.T_W_C_planes = correction_ * *fused.T_W_C;
     fused.patches_live = map_.liveCount();

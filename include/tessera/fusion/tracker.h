@@ -1,6 +1,7 @@
 #pragma once
-// Camera tracking: frame-to-frame RGB-D odometry (OpenCV's RgbdICPOdometry: photometric and
-// point-to-plane ICP terms over a coarse-to-fine pyramid), with tracking-loss detection.
+// Camera tracking: RGB-D odometry (OpenCV's RgbdICPOdometry: photometric and point-to-plane ICP
+// terms over a coarse-to-fine pyramid) of each frame against a keyframe, started from a
+// constant-velocity guess, with tracking-loss detection.
 #include <memory>
 #include <string>
 #include <vector>
@@ -14,11 +15,23 @@ struct TrackerConfig {
   double min_depth_m = 0.3;
   double max_depth_m = 4.0;
   double max_depth_difference_m = 0.07;  // correspondences farther apart in depth are dropped
-  double max_translation_m = 0.15;       // per frame; a larger jump is a tracking loss
-  double max_rotation_deg = 15.0;        // per frame; a larger turn is a tracking loss
+  // A solve that moves the pose farther than this from the motion guess (per frame interval)
+  // is a tracking loss.
+  double max_translation_m = 0.15;
+  double max_rotation_deg = 15.0;
   int lost_frames_before_restart = 10;   // then tracking restarts from the current frame
   // Gauss-Newton iterations per pyramid level, finest level first; the level count follows.
-  std::vector<int> iterations_per_level = {3, 3, 4, 6};
+  std::vector<int> iterations_per_level = {2, 3, 4};
+  // Odometry runs on blocks of N x N pixels: 2 tracks 640x480 frames at 320x240, a quarter of
+  // the work (grey and depth averaged over each block, depth not across an edge).
+  int tracking_scale = 2;
+  // Frames are tracked against a keyframe until the camera is this far from it; then the
+  // frame just tracked becomes the keyframe.
+  double keyframe_translation_m = 0.10;
+  double keyframe_rotation_deg = 10.0;
+  // Start each solve from the last frame-to-frame motion, stretched over the time since the
+  // last tracked frame (constant velocity), rather than from no motion.
+  bool constant_velocity = true;
 };
 
 void readConfig(const core::ConfigSection& section, TrackerConfig& config);

@@ -42,6 +42,7 @@ struct RunSummary {
   std::size_t frames_without_pose = 0;  // not integrated: no pose, tracking lost, or rejected
   int holdout_every = 0;
   std::size_t frames_held_out = 0;  // posed but not fused or textured (--holdout-every)
+  std::size_t frames_between_fused = 0;  // posed only (tsdf.integrate_every_n_frames)
   std::string poses;                // "track" or "gt"
   std::size_t tracking_losses = 0;
   std::size_t tracking_restarts = 0;

@@ -80,6 +80,7 @@ struct FusedFrame {
   core::Frame frame;
   bool integrated = false;
   bool held_out = false;                // left out of fusion and texturing (run --holdout-every)
+  bool between_fused = false;  // posed, but not fused (tsdf.integrate_every_n_frames)
   std::optional<core::Isometry> T_W_C;  // the pose it was fused at
   std::string skip_reason;              // why the frame was not integrated
   std::size_t tsdf_bytes = 0;
@@ -136,13 +137,20 @@ class IntegrationStage {
   std::size_t framesIntegrated() const { return integrated_; }
   std::size_t framesSkipped() const { return skipped_; }
   std::size_t framesHeldOut() const { return held_out_; }
+  std::size_t framesBetweenFused() const { return between_fused_; }
   std::size_t blocksReleased() const { return blocks_released_; }
   const StageTimer& timer() const { return timer_; }
 
  private:
+  // Whether the frame posed at T_W_C is fused (TsdfConfig::integrate_every_n_frames).
+  bool wantsFrame(const core::Isometry& T_W_C);
+
   fusion::TsdfMap map_;
   int holdout_every_;
+  std::optional<core::Isometry> last_fused_pose_;
+  int posed_since_fused_ = 0;
   std::size_t held_out_ = 0;
+  std::size_t between_fused_ = 0;
   std::size_t integrated_ = 0;
   std::size_t skipped_ = 0;
   std::size_t blocks_released_ = 0;

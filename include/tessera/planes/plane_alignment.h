@@ -12,7 +12,7 @@
 namespace tessera::planes {
 
 struct PlaneAlignmentConfig {
-  bool enabled = true;
+  bool enabled = false;  // adds error to the keyframe tracker (config/default.yaml)
   double min_patch_area_m2 = 0.5;  // only patches this large ...
   int min_patch_frames = 15;       // ... and seen in this many frames anchor the pose
   int points_per_region = 400;     // points of each region used (evenly spread)
