@@ -1,7 +1,7 @@
 #include <gtest/gtest.h>
 
+#include "support/synthetic_office.h"
 #include "support/test_data.h"
-#include "tessera/drivers/synthetic/renderer.h"
 #include "tessera/fusion/tracker.h"
 
 namespace tessera::fusion {
@@ -9,37 +9,10 @@ namespace {
 
 namespace synthetic = drivers::synthetic;
 
-// The office seen from T_W_C through the Kinect v1 model (noise seeded by `seed`).
-core::Frame officeFrameAt(const synthetic::Scene& scene, const core::Isometry& T_W_C, int seed) {
-  core::Frame frame;
-  frame.index = static_cast<std::uint64_t>(seed);
-  frame.intrinsics = scene.sensor.intrinsics;
-  frame.T_W_C_gt = T_W_C;
-  const auto view = synthetic::renderClean(scene, frame.intrinsics, T_W_C, 1);
-  synthetic::applySensor(scene.sensor, view, static_cast<std::uint64_t>(seed), frame.depth_mm,
-                         frame.rgb);
-  return frame;
-}
-
-// Frame i of the office scene's own camera path.
-core::Frame officeFrame(const synthetic::Scene& scene, int i) {
-  return officeFrameAt(scene, scene.cameraPose(i), i);
-}
-
-// The camera `offset_C` (in its own frame) from the start pose, turned by `yaw_deg` about its
-// vertical axis (camera y points down).
-core::Isometry moved(const core::Isometry& start, const Eigen::Vector3d& offset_C, double yaw_deg) {
-  core::Isometry T = start;
-  T.translation() += start.linear() * offset_C;
-  T.linear() =
-      start.linear() *
-      Eigen::AngleAxisd(yaw_deg * M_PI / 180.0, Eigen::Vector3d::UnitY()).toRotationMatrix();
-  return T;
-}
-
-double rotationErrorDeg(const core::Isometry& a, const core::Isometry& b) {
-  return Eigen::AngleAxisd(a.linear().transpose() * b.linear()).angle() * 180.0 / M_PI;
-}
+using test::moved;
+using test::officeFrame;
+using test::officeFrameAt;
+using test::rotationErrorDeg;
 
 struct PathErrors {
   double worst_m = 0.0;
