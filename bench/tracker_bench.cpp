@@ -68,7 +68,7 @@ int main(int argc, char** argv) {
     fusion::Tracker tracker(config);
     tessera::eval::Trajectory estimate, truth;
     std::vector<double> ms;
-    int lost = 0, restarts = 0;
+    int lost = 0, restarts = 0, relocalised = 0;
     std::pair<double, std::uint64_t> worst_step{0.0, 0};
     for (std::size_t i = 0; i < all.size(); i += every) {
       const auto& frame = all[i];
@@ -79,10 +79,15 @@ int main(int argc, char** argv) {
                                                              start)
                        .count());
       if (result.status == fusion::TrackingStatus::kLost) {
+        if (verbose) fmt::print("frame {}: lost: {}\n", frame.index, result.problem);
         ++lost;
         continue;
       }
       if (result.status == fusion::TrackingStatus::kRestarted) ++restarts;
+      if (result.status == fusion::TrackingStatus::kRelocalised) {
+        ++relocalised;
+        if (verbose) fmt::print("frame {}: relocalised\n", frame.index);
+      }
       // The step's error: this frame's pose relative to the last tracked one, against the truth.
       if (!estimate.empty() && result.status == fusion::TrackingStatus::kTracked) {
         const auto& [last_ns, last_T] = *estimate.rbegin();
@@ -101,10 +106,10 @@ int main(int argc, char** argv) {
     const auto ate = tessera::eval::absoluteTrajectoryError(estimate, truth);
     fmt::print(
         "{}: {} frames (every {}), scale {}, iterations [{}], velocity {}: {:.1f} ms/frame mean, "
-        "{:.1f} median; lost {}, restarts {}; worst step {:.1f} mm (frame {}); ATE {}\n",
+        "{:.1f} median; lost {}, relocalised {}, restarts {}; worst step {:.1f} mm (frame {}); ATE {}\n",
         source_path, ms.size(), every, config.tracking_scale,
         fmt::join(config.iterations_per_level, ","), config.constant_velocity ? "on" : "off", mean,
-        sorted[sorted.size() / 2], lost, restarts, worst_step.first, worst_step.second,
+        sorted[sorted.size() / 2], lost, relocalised, restarts, worst_step.first, worst_step.second,
         ate ? fmt::format("{:.1f} mm RMSE, {:.1f} mm max", ate->rmse_m * 1e3, ate->max_m * 1e3)
             : std::string("n/a"));
   } catch (const tessera::core::Error& e) {

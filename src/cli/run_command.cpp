@@ -77,13 +77,15 @@ int runCommand(const RunArguments& args) {
     const pipeline::RunSummary summary = pipeline::runPipeline(*source, config, run_options);
     progress.finish();
     spdlog::info(
-        "{} frames in {:.2f} s ({:.1f} frames/s), {} fused, {} posed between fused ones, {} bad, "
+        "{} frames in {:.2f} s ({:.1f} frames/s), {} integrated, {} between integrations, {} bad, "
         "{} without pose",
         summary.frames, summary.wall_s, summary.fps, summary.frames_integrated,
-        summary.frames_between_fused, summary.frames_bad, summary.frames_without_pose);
+        summary.frames_between_integrations, summary.frames_bad, summary.frames_without_pose);
     if (summary.poses == "track") {
-      spdlog::info("tracking: {} frames lost, {} restarts", summary.tracking_losses,
-                   summary.tracking_restarts);
+      spdlog::info(
+          "tracking: {} frames lost, {} relocalised, {} restarts, {} posed from features first",
+          summary.tracking_losses, summary.relocalisations, summary.tracking_restarts,
+          summary.feature_poses);
     }
     if (summary.live) {
       const core::LiveStats& live = summary.live_stats;

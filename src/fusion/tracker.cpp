@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <deque>
+#include <memory>
 #include <limits>
 #include <optional>
 
@@ -28,6 +30,8 @@ void readConfig(const core::ConfigSection& section, TrackerConfig& config) {
   section.read("keyframe_translation_m", config.keyframe_translation_m);
   section.read("keyframe_rotation_deg", config.keyframe_rotation_deg);
   section.read("constant_velocity", config.constant_velocity);
+  section.read("feature_gap_s", config.feature_gap_s);
+  section.read("relocalisation_keyframes", config.relocalisation_keyframes);
   if (config.max_depth_m <= config.min_depth_m || config.max_translation_m <= 0.0 ||
       config.max_rotation_deg <= 0.0 || config.lost_frames_before_restart < 1) {
     throw core::ConfigError(
@@ -43,6 +47,9 @@ void readConfig(const core::ConfigSection& section, TrackerConfig& config) {
   if (config.tracking_scale != 1 && config.tracking_scale != 2 && config.tracking_scale != 4) {
     throw core::ConfigError("tracker: tracking_scale must be 1, 2 or 4");
   }
+  if (config.feature_gap_s <= 0.0 || config.relocalisation_keyframes < 1) {
+    throw core::ConfigError("tracker: feature_gap_s must be positive and relocalisation_keyframes >= 1");
+  }
   if (config.keyframe_translation_m < 0.0 || config.keyframe_rotation_deg < 0.0) {
     throw core::ConfigError("tracker: keyframe_translation_m and keyframe_rotation_deg must be >= 0");
   }
@@ -53,40 +60,56 @@ namespace {
 // A block of depth readings spread wider than this fraction of their mean straddles an edge.
 constexpr double kBlockSpreadFraction = 0.03;
 
+// A frame with fewer valid depth readings than this share of its pixels cannot be posed.
+constexpr double kMinValidDepthFraction = 0.02;
+
+// A solve is kept only if at least this share of the frame's points that land on the
+// keyframe's depth agree with it within max_depth_difference_m. Measured on the office and TUM
+// fr1_rpy: correct solves agree on 85-99%; wrong minima after a large motion on far fewer.
+constexpr double kMinDepthAgreement = 0.6;
+
+// The frame's grey (colour registered to depth) and depth in metres, NaN where missing.
+void fullImages(const core::Frame& frame, cv::Mat& grey, cv::Mat& depth_m) {
+  cv::cvtColor(core::registerColourToDepth(frame), grey, cv::COLOR_RGB2GRAY);
+  frame.depth_mm.convertTo(depth_m, CV_32F, 1e-3);
+  depth_m.setTo(std::numeric_limits<float>::quiet_NaN(), frame.depth_mm == 0);
+}
+
 // The odometry's inputs at 1/scale of the frame's resolution, each pixel the mean of a
 // scale x scale block: grey by area, depth over the block's valid readings when they agree
-// (else none, so that an edge is never blurred). Averaging rather than sampling one pixel per
-// block matters on noisy depth: on the synthetic Kinect office, sampling drifted 1.5x more.
-void odometryImages(const core::Frame& frame, int scale, cv::Mat& grey, cv::Mat& depth_m) {
-  cv::cvtColor(core::registerColourToDepth(frame), grey, cv::COLOR_RGB2GRAY);
-  const float no_depth = std::numeric_limits<float>::quiet_NaN();
+// (else none, so that an edge is never blurred). Averaging rather than keeping one pixel per
+// block matters on noisy depth: the solve's error grows with the noise of fewer points.
+void blockImages(const cv::Mat& grey, const cv::Mat& depth_m, int scale, cv::Mat& grey_out,
+                 cv::Mat& depth_out) {
   if (scale == 1) {
-    frame.depth_mm.convertTo(depth_m, CV_32F, 1e-3);
-    depth_m.setTo(no_depth, frame.depth_mm == 0);
+    grey_out = grey;
+    depth_out = depth_m;
     return;
   }
-  const cv::Size size(frame.depth_mm.cols / scale, frame.depth_mm.rows / scale);
-  cv::resize(grey, grey, size, 0, 0, cv::INTER_AREA);
-  depth_m.create(size, CV_32F);
+  const cv::Size size(depth_m.cols / scale, depth_m.rows / scale);
+  cv::resize(grey, grey_out, size, 0, 0, cv::INTER_AREA);
+  depth_out.create(size, CV_32F);
   for (int v = 0; v < size.height; ++v) {
-    auto* out = depth_m.ptr<float>(v);
+    auto* out = depth_out.ptr<float>(v);
     for (int u = 0; u < size.width; ++u) {
-      int count = 0, sum = 0, low = std::numeric_limits<int>::max(), high = 0;
+      int count = 0;
+      double sum = 0.0;
+      float low = std::numeric_limits<float>::max(), high = 0.0f;
       for (int dv = 0; dv < scale; ++dv) {
-        const auto* in = frame.depth_mm.ptr<std::uint16_t>(v * scale + dv) + u * scale;
+        const float* in = depth_m.ptr<float>(v * scale + dv) + u * scale;
         for (int du = 0; du < scale; ++du) {
-          const int mm = in[du];
-          if (mm == 0) continue;
+          const float z = in[du];
+          if (!std::isfinite(z)) continue;
           ++count;
-          sum += mm;
-          low = std::min(low, mm);
-          high = std::max(high, mm);
+          sum += z;
+          low = std::min(low, z);
+          high = std::max(high, z);
         }
       }
-      const double mean_mm = count > 0 ? static_cast<double>(sum) / count : 0.0;
-      out[u] = count > 0 && high - low <= kBlockSpreadFraction * mean_mm
-                   ? static_cast<float>(mean_mm * 1e-3)
-                   : no_depth;
+      const double mean = count > 0 ? sum / count : 0.0;
+      out[u] = count > 0 && high - low <= kBlockSpreadFraction * mean
+                   ? static_cast<float>(mean)
+                   : std::numeric_limits<float>::quiet_NaN();
     }
   }
 }
@@ -106,8 +129,8 @@ core::Isometry stretched(const core::Isometry& T, double ratio) {
 // frame by frame (a 2% scale within 30 frames of the synthetic office) and tracking is lost.
 core::Isometry rigid(const Eigen::Matrix4d& T) {
   core::Isometry out = core::Isometry::Identity();
-  out.linear() = Eigen::Quaterniond(Eigen::Matrix3d(T.topLeftCorner<3, 3>())).normalized()
-                     .toRotationMatrix();
+  out.linear() =
+      Eigen::Quaterniond(Eigen::Matrix3d(T.topLeftCorner<3, 3>())).normalized().toRotationMatrix();
   out.translation() = T.topRightCorner<3, 1>();
   return out;
 }
@@ -116,17 +139,58 @@ double angleDeg(const core::Isometry& T) {
   return Eigen::AngleAxisd(T.linear()).angle() * 180.0 / M_PI;
 }
 
+// The share of `depth_a`'s points (every 4th pixel) that, moved by T_b_a and projected into
+// camera b, land on a depth of `depth_b` within `tolerance_m`; among those that land on any.
+double depthAgreement(const cv::Mat& depth_a, const cv::Mat& depth_b, const cv::Matx33d& K,
+                      const core::Isometry& T_b_a, double tolerance_m) {
+  const double fx = K(0, 0), fy = K(1, 1), cx = K(0, 2), cy = K(1, 2);
+  int landed = 0, agreed = 0;
+  for (int v = 0; v < depth_a.rows; v += 4) {
+    const float* row = depth_a.ptr<float>(v);
+    for (int u = 0; u < depth_a.cols; u += 4) {
+      const double z = row[u];
+      if (!std::isfinite(z)) continue;
+      const Eigen::Vector3d p_b = T_b_a * Eigen::Vector3d((u - cx) * z / fx, (v - cy) * z / fy, z);
+      if (p_b.z() <= 0.0) continue;
+      const long ub = std::lround(fx * p_b.x() / p_b.z() + cx);
+      const long vb = std::lround(fy * p_b.y() / p_b.z() + cy);
+      if (ub < 0 || vb < 0 || ub >= depth_b.cols || vb >= depth_b.rows) continue;
+      const float zb = depth_b.at<float>(static_cast<int>(vb), static_cast<int>(ub));
+      if (!std::isfinite(zb)) continue;
+      ++landed;
+      if (std::abs(zb - p_b.z()) <= tolerance_m) ++agreed;
+    }
+  }
+  return landed > 0 ? static_cast<double>(agreed) / landed : 0.0;
+}
+
+// A frame as the tracker keeps it: its odometry cache, the block-averaged depth the cache was
+// built from (for the agreement check) and the full-resolution images (for features).
+struct TrackedImages {
+  cv::Ptr<cv::rgbd::OdometryFrame> odometry;
+  cv::Mat depth_small;
+  cv::Mat grey, depth_m;
+};
+
+struct Keyframe {
+  TrackedImages images;  // odometry cache built for the destination role
+  core::Isometry T_W_C = core::Isometry::Identity();
+  FeatureFrame features;
+};
+
 }  // namespace
 
 struct Tracker::State {
   cv::Ptr<cv::rgbd::RgbdICPOdometry> odometry;
-  // Each frame is the odometry's source and the keyframe its destination. A source needs only
+  cv::Matx33d camera_matrix;  // at the tracking scale
+  // Each frame is the odometry's source and a keyframe its destination. A source needs only
   // pyramids and points (3 ms at 640x480); the destination's normals and gradients (18 ms) are
-  // built once per keyframe. Errors add up keyframe by keyframe, not frame by frame.
-  cv::Ptr<cv::rgbd::OdometryFrame> keyframe;
-  core::Isometry T_W_keyframe = core::Isometry::Identity();
-  // The last tracked frame: its pose, time and source cache.
-  cv::Ptr<cv::rgbd::OdometryFrame> previous;
+  // built once per keyframe, and errors add up keyframe by keyframe, not frame by frame. The
+  // newest keyframe (back) is tracked against; the others are kept to relocalise against.
+  std::deque<std::shared_ptr<Keyframe>> keyframes;
+  std::shared_ptr<Keyframe> reference;  // the keyframe frames are tracked against
+  // The last tracked frame: its images, pose and time.
+  TrackedImages previous;
   core::Isometry T_W_previous = core::Isometry::Identity();
   std::int64_t previous_timestamp_ns = 0;
   // The last frame-to-frame motion (T_current_previous) and the time it took, for the
@@ -134,12 +198,18 @@ struct Tracker::State {
   std::optional<core::Isometry> last_motion;
   std::int64_t last_motion_ns = 0;
   int lost_in_a_row = 0;
+  bool interrupted = false;
 };
 
 Tracker::Tracker(const TrackerConfig& config)
     : config_(config), state_(std::make_unique<State>()) {}
 
 Tracker::~Tracker() = default;
+
+void Tracker::sourceInterrupted() {
+  state_->interrupted = true;
+  state_->last_motion.reset();
+}
 
 TrackingResult Tracker::track(const core::Frame& frame, const core::Isometry& initial_T_W_C) {
   const core::Intrinsics& k = frame.intrinsics;
@@ -148,21 +218,23 @@ TrackingResult Tracker::track(const core::Frame& frame, const core::Isometry& in
     // A block's mean sits at the centre of its pixels: u_block = (u - (scale - 1) / 2) / scale.
     const double scale = config_.tracking_scale;
     const double shift = (scale - 1.0) / 2.0;
-    const cv::Mat camera_matrix =
-        (cv::Mat_<double>(3, 3) << k.fx / scale, 0, (k.cx - shift) / scale, 0, k.fy / scale,
-         (k.cy - shift) / scale, 0, 0, 1);
-    s.odometry =
-        cv::rgbd::RgbdICPOdometry::create(camera_matrix, static_cast<float>(config_.min_depth_m),
-                                          static_cast<float>(config_.max_depth_m),
-                                          static_cast<float>(config_.max_depth_difference_m));
+    s.camera_matrix = cv::Matx33d(k.fx / scale, 0, (k.cx - shift) / scale, 0, k.fy / scale,
+                                  (k.cy - shift) / scale, 0, 0, 1);
+    s.odometry = cv::rgbd::RgbdICPOdometry::create(
+        cv::Mat(s.camera_matrix), static_cast<float>(config_.min_depth_m),
+        static_cast<float>(config_.max_depth_m),
+        static_cast<float>(config_.max_depth_difference_m));
     s.odometry->setIterationCounts(cv::Mat(config_.iterations_per_level, true));
     // One gradient threshold per level (OpenCV's default value).
     s.odometry->setMinGradientMagnitudes(
         cv::Mat(std::vector<float>(config_.iterations_per_level.size(), 10.0f), true));
   }
-  cv::Mat grey, depth;
-  odometryImages(frame, config_.tracking_scale, grey, depth);
-  cv::Ptr<cv::rgbd::OdometryFrame> current = cv::rgbd::OdometryFrame::create(grey, depth);
+  TrackedImages current;
+  fullImages(frame, current.grey, current.depth_m);
+  cv::Mat grey_small;
+  blockImages(current.grey, current.depth_m, config_.tracking_scale, grey_small,
+              current.depth_small);
+  current.odometry = cv::rgbd::OdometryFrame::create(grey_small, current.depth_small);
 
   TrackingResult result;
   const auto prepare = [&](cv::Ptr<cv::rgbd::OdometryFrame> odometry_frame, int cache) {
@@ -174,22 +246,53 @@ TrackingResult Tracker::track(const core::Frame& frame, const core::Isometry& in
       return false;
     }
   };
-  const bool prepared = prepare(current, cv::rgbd::OdometryFrame::CACHE_SRC);
-  const auto restart = [&](TrackingStatus status, const core::Isometry& T_W_C) {
-    if (!prepare(current, cv::rgbd::OdometryFrame::CACHE_DST)) {
-      result.status = TrackingStatus::kLost;
-      return result;
+  // Makes `images` (posed at T_W_C) the keyframe frames are tracked against.
+  const auto makeKeyframe = [&](const TrackedImages& images, const core::Isometry& T_W_C) {
+    if (!prepare(images.odometry, cv::rgbd::OdometryFrame::CACHE_DST)) return false;
+    auto keyframe = std::make_shared<Keyframe>();
+    keyframe->images = images;
+    keyframe->T_W_C = T_W_C;
+    keyframe->features = describeFeatures(images.grey, images.depth_m, k, config_.features);
+    s.keyframes.push_back(keyframe);
+    while (static_cast<int>(s.keyframes.size()) > std::max(1, config_.relocalisation_keyframes)) {
+      s.keyframes.pop_front();
     }
-    s.keyframe = s.previous = current;
-    s.T_W_keyframe = s.T_W_previous = T_W_C;
+    s.reference = keyframe;
+    return true;
+  };
+  const auto accept = [&](TrackingStatus status, const core::Isometry& T_W_C,
+                          std::int64_t gap_ns) {
+    if (gap_ns > 0 && status == TrackingStatus::kTracked) {
+      s.last_motion = T_W_C.inverse() * s.T_W_previous;
+      s.last_motion_ns = gap_ns;
+    } else {
+      s.last_motion.reset();  // no timestamps, or a new start: no velocity to go by
+    }
+    s.previous = current;
+    s.T_W_previous = T_W_C;
     s.previous_timestamp_ns = frame.timestamp_ns;
-    s.last_motion.reset();
     s.lost_in_a_row = 0;
+    s.interrupted = false;
     result.status = status;
     result.T_W_C = T_W_C;
     return result;
   };
-  if (!s.keyframe && prepared) return restart(TrackingStatus::kFirst, initial_T_W_C);
+  const int valid_depth = cv::countNonZero(current.depth_small == current.depth_small);  // not NaN
+  if (valid_depth < kMinValidDepthFraction * static_cast<double>(current.depth_small.total())) {
+    result.problem = fmt::format("frame has almost no valid depth ({} of {} pixels)", valid_depth,
+                                 current.depth_small.total());
+    ++s.lost_in_a_row;
+    result.status = TrackingStatus::kLost;
+    return result;
+  }
+  const bool prepared = prepare(current.odometry, cv::rgbd::OdometryFrame::CACHE_SRC);
+  if (prepared && !s.reference) {
+    if (!makeKeyframe(current, initial_T_W_C)) {
+      result.status = TrackingStatus::kLost;
+      return result;
+    }
+    return accept(TrackingStatus::kFirst, initial_T_W_C, 0);
+  }
 
   // The time since the last tracked frame over the time the last motion took: more than one
   // when frames were dropped or lost. The guess stretches with it, and so do the motion bounds.
@@ -200,69 +303,104 @@ TrackingResult Tracker::track(const core::Frame& frame, const core::Isometry& in
                      static_cast<double>(config_.lost_frames_before_restart + 1))
           : 1.0;
   const double bound_scale = std::max(1.0, ratio);
-  const core::Isometry T_W_guess =
+  core::Isometry T_W_guess =
       config_.constant_velocity && s.last_motion
           ? core::Isometry(s.T_W_previous * stretched(*s.last_motion, ratio).inverse())
           : s.T_W_previous;
-  const auto solve = [&](core::Isometry& T_keyframe_current) {
-    cv::Mat guess, Rt;  // keyframe_p = Rt * current_p; OpenCV wants 4x4 CV_64FC1 matrices
-    cv::eigen2cv(Eigen::Matrix4d((s.T_W_keyframe.inverse() * T_W_guess).matrix()), guess);
+
+  // Dense odometry against keyframe `key` from T_W_guess; the pose, if it converged within
+  // the bounds and the depths agree.
+  const auto solve = [&](const Keyframe& key) -> std::optional<core::Isometry> {
+    cv::Mat guess, Rt;  // key_p = Rt * current_p; OpenCV wants 4x4 CV_64FC1 matrices
+    cv::eigen2cv(Eigen::Matrix4d((key.T_W_C.inverse() * T_W_guess).matrix()), guess);
     try {
       s.odometry->setMaxTranslation(config_.max_translation_m * bound_scale);
       s.odometry->setMaxRotation(config_.max_rotation_deg * bound_scale);
-
-      if (!s.odometry->compute(current, s.keyframe, Rt, guess)) return false;
+      cv::Ptr<cv::rgbd::OdometryFrame> destination = key.images.odometry;
+      if (!s.odometry->compute(current.odometry, destination, Rt, guess)) {
+        return std::nullopt;
+      }
     } catch (const cv::Exception& e) {
       result.problem = fmt::format("odometry failed: {}", e.what());
-      return false;
+      return std::nullopt;
     }
     Eigen::Matrix4d T;
     cv::cv2eigen(Rt, T);
-    T_keyframe_current = rigid(T);
-    return true;
+    const core::Isometry T_key_current = rigid(T);
+    if (depthAgreement(current.depth_small, key.images.depth_small, s.camera_matrix,
+                       T_key_current, config_.max_depth_difference_m) < kMinDepthAgreement) {
+      result.problem = "odometry converged to a pose the depths disagree with";
+      return std::nullopt;
+    }
+    return key.T_W_C * T_key_current;
   };
-  core::Isometry T_keyframe_current;
-  bool ok = prepared && solve(T_keyframe_current);
-  if (!ok && prepared && s.previous != s.keyframe &&
-      prepare(s.previous, cv::rgbd::OdometryFrame::CACHE_DST)) {
-    // The keyframe may be too far from this view: try again from the last tracked frame.
-    s.keyframe = s.previous;
-    s.T_W_keyframe = s.T_W_previous;
-    ok = solve(T_keyframe_current);
+  std::optional<FeatureFrame> current_features;
+  // The pose of the current frame from features against keyframe `key`, as the new guess.
+  const auto guessFromFeatures = [&](const Keyframe& key) {
+    if (!current_features) {
+      current_features = describeFeatures(current.grey, current.depth_m, k, config_.features);
+    }
+    const auto pose = estimateFeaturePose(key.features, *current_features, k, config_.features);
+    if (pose) {
+      T_W_guess = key.T_W_C * pose->T_current_reference.inverse();
+      result.from_features = true;
+    }
+    return pose.has_value();
+  };
+
+  std::optional<core::Isometry> T_W_C;
+  TrackingStatus status = TrackingStatus::kTracked;
+  if (prepared && (s.interrupted || s.lost_in_a_row > 0)) {
+    // Relocalise: the newest keyframe whose features give a pose, refined densely against it.
+    for (auto it = s.keyframes.rbegin(); it != s.keyframes.rend() && !T_W_C; ++it) {
+      if (!guessFromFeatures(**it)) continue;
+      T_W_C = solve(**it);
+      if (!T_W_C) T_W_C = T_W_guess;  // the feature pose alone: still better than none
+      s.reference = *it;
+      status = TrackingStatus::kRelocalised;
+    }
+    if (!T_W_C && s.interrupted) {
+      result.problem = "not relocalised after the source was interrupted";
+    }
   }
-  if (!ok) {
+  if (prepared && !T_W_C && !s.interrupted) {
+    // A large gap in time: features first. Otherwise dense from the motion guess, then
+    // features when that fails (a keyframe recording's steps do not show in its clock).
+    const bool large_gap = gap_ns > static_cast<std::int64_t>(config_.feature_gap_s * 1e9);
+    if (large_gap) guessFromFeatures(*s.reference);
+    T_W_C = solve(*s.reference);
+    if (!T_W_C && s.previous.odometry != s.reference->images.odometry &&
+        makeKeyframe(s.previous, s.T_W_previous)) {
+      // The keyframe may be too far from this view: try again from the last tracked frame.
+      T_W_C = solve(*s.reference);
+    }
+    if (!T_W_C && !result.from_features && guessFromFeatures(*s.reference)) {
+      T_W_C = solve(*s.reference);
+      if (!T_W_C) T_W_C = T_W_guess;
+    }
+  }
+  if (!T_W_C) {
     if (result.problem.empty()) {
       result.problem =
           "odometry found no motion within the bounds (too few correspondences, "
           "or a jump above the translation or rotation limit)";
     }
     if (++s.lost_in_a_row >= config_.lost_frames_before_restart && prepared) {
-      // Start a new segment at the last good pose: the map stays consistent around it.
-      return restart(TrackingStatus::kRestarted, s.T_W_previous);
+      // Not found again: a new segment starts at the last good pose. The old keyframes stay,
+      // so that a later frame that sees them again brings the map back together.
+      if (makeKeyframe(current, s.T_W_previous)) {
+        return accept(TrackingStatus::kRestarted, s.T_W_previous, 0);
+      }
     }
     result.status = TrackingStatus::kLost;
     return result;
   }
-  const core::Isometry T_W_C = s.T_W_keyframe * T_keyframe_current;
-  if (gap_ns > 0) {
-    s.last_motion = T_W_C.inverse() * s.T_W_previous;
-    s.last_motion_ns = gap_ns;
-  } else {
-    s.last_motion.reset();  // no timestamps: no velocity to go by
+  const core::Isometry T_key_current = s.reference->T_W_C.inverse() * *T_W_C;
+  accept(status, *T_W_C, gap_ns);
+  if (T_key_current.translation().norm() > config_.keyframe_translation_m ||
+      angleDeg(T_key_current) > config_.keyframe_rotation_deg) {
+    makeKeyframe(current, *T_W_C);
   }
-  s.previous = current;
-  s.previous_timestamp_ns = frame.timestamp_ns;
-  s.T_W_previous = T_W_C;
-  s.lost_in_a_row = 0;
-  if (T_keyframe_current.translation().norm() > config_.keyframe_translation_m ||
-      angleDeg(T_keyframe_current) > config_.keyframe_rotation_deg) {
-    if (prepare(current, cv::rgbd::OdometryFrame::CACHE_DST)) {
-      s.keyframe = current;
-      s.T_W_keyframe = T_W_C;
-    }
-  }
-  result.status = TrackingStatus::kTracked;
-  result.T_W_C = T_W_C;
   return result;
 }
 

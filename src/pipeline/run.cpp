@@ -166,10 +166,12 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
   summary.frames_without_pose = integration_stage.framesSkipped();
   summary.holdout_every = options.holdout_every;
   summary.frames_held_out = integration_stage.framesHeldOut();
-  summary.frames_between_fused = integration_stage.framesBetweenFused();
+  summary.frames_between_integrations = integration_stage.framesBetweenIntegrations();
   summary.poses = options.poses == PoseSource::kTrack ? "track" : "gt";
   summary.tracking_losses = tracking_stage.trackingLosses();
   summary.tracking_restarts = tracking_stage.trackingRestarts();
+  summary.relocalisations = tracking_stage.relocalisations();
+  summary.feature_poses = tracking_stage.featurePoses();
   summary.source_end_problem = source_stage.endProblem();
   summary.live = source.isLive();
   summary.live_stats = source_stage.liveStatsAtEnd();
@@ -239,10 +241,12 @@ void writeReport(const RunSummary& summary, const std::filesystem::path& path) {
       {"frames_without_pose", summary.frames_without_pose},
       {"holdout_every", summary.holdout_every},
       {"frames_held_out", summary.frames_held_out},
-      {"frames_between_fused", summary.frames_between_fused},
+      {"frames_between_integrations", summary.frames_between_integrations},
       {"poses", summary.poses},
       {"tracking_losses", summary.tracking_losses},
       {"tracking_restarts", summary.tracking_restarts},
+      {"relocalisations", summary.relocalisations},
+      {"feature_poses", summary.feature_poses},
       {"wall_s", summary.wall_s},
       {"fps", summary.fps},
       {"peak_rss_mb", summary.peak_rss_mb},

@@ -21,6 +21,7 @@ RunConfig readRunConfig(const core::ConfigDocument& doc) {
   try {
     readConfig(root.section("pipeline"), config.pipeline);
     fusion::readConfig(root.section("tracker"), config.tracker);
+    fusion::readConfig(root.section("tracker_features"), config.tracker.features);
     fusion::readConfig(root.section("tsdf"), config.tsdf);
     planes::readConfig(root.section("planes"), config.planes);
     planes::readConfig(root.section("patches"), config.patches);

@@ -83,6 +83,11 @@ std::optional<core::Isometry> TrackingStage::poseOf(const core::Frame& frame,
     problem = "tracking lost: " + tracked.problem;
     return std::nullopt;
   }
+  if (tracked.from_features) ++feature_poses_;
+  if (tracked.status == fusion::TrackingStatus::kRelocalised) {
+    ++relocalisations_;
+    spdlog::info("frame {}: relocalised against a recent keyframe", frame.index);
+  }
   if (tracked.status == fusion::TrackingStatus::kRestarted) {
     ++tracking_restarts_;
     spdlog::warn("frame {}: tracking restarted after {} lost frames", frame.index,
@@ -94,6 +99,8 @@ std::optional<core::Isometry> TrackingStage::poseOf(const core::Frame& frame,
 TrackedFrame TrackingStage::process(core::Frame frame) {
   TrackedFrame tracked;
   if (frame.source_interrupted) {
+    // The camera may move while the device is away: the next frame is relocalised.
+    if (poses_ == PoseSource::kTrack) tracker_.sourceInterrupted();
     tracked.skip_reason = "the source was interrupted";
     tracked.frame = std::move(frame);
     return tracked;
@@ -121,17 +128,17 @@ IntegrationStage::IntegrationStage(const fusion::TsdfConfig& tsdf, int thread_ca
 }
 
 bool IntegrationStage::wantsFrame(const core::Isometry& T_W_C) {
-  ++posed_since_fused_;
-  bool wanted = !last_fused_pose_ || posed_since_fused_ >= map_.config().integrate_every_n_frames;
+  ++posed_since_integrated_;
+  bool wanted = !last_integrated_pose_ || posed_since_integrated_ >= map_.config().integrate_every_n_frames;
   if (!wanted) {
-    // A frame far from the last one fused (sparse keyframes, dropped frames) always is.
-    const core::Isometry motion = last_fused_pose_->inverse() * T_W_C;
+    // A frame far from the last one integrated (sparse keyframes, dropped frames) always is.
+    const core::Isometry motion = last_integrated_pose_->inverse() * T_W_C;
     const double angle_deg = Eigen::AngleAxisd(motion.linear()).angle() * 180.0 / M_PI;
     wanted = motion.translation().norm() > 0.05 || angle_deg > 3.0;
   }
   if (wanted) {
-    last_fused_pose_ = T_W_C;
-    posed_since_fused_ = 0;
+    last_integrated_pose_ = T_W_C;
+    posed_since_integrated_ = 0;
   }
   return wanted;
 }
@@ -155,8 +162,8 @@ FusedFrame IntegrationStage::process(TrackedFrame tracked) {
     return fused;
   }
   if (fused.T_W_C && !wantsFrame(*fused.T_W_C)) {
-    fused.between_fused = true;
-    ++between_fused_;
+    fused.between_integrations = true;
+    ++between_integrations_;
     fused.tsdf_bytes = map_.memoryBytes();
     fused.frame = std::move(tracked.frame);
     return fused;
@@ -234,7 +241,7 @@ FusedFrame PlaneStage::process(FusedFrame fused) {
     fused.patches_finalized = map_.finalizedCount();
     return fused;
   }
-  if (fused.held_out || fused.between_fused) {
+  if (fused.held_out) {
     // Only the pose, corrected as the frames around it are; the map does not see the frame.
     if (fused.T_W_C) fused.T_W_C_planes = correction_ * *fused.T_W_C;
     fused.patches_live = map_.liveCount();
@@ -244,7 +251,7 @@ FusedFrame PlaneStage::process(FusedFrame fused) {
   {
     ScopedStageTime time(timer_);
     try {
-      if (fused.integrated && fused.T_W_C) {
+      if ((fused.integrated || fused.between_integrations) && fused.T_W_C) {
         // The tracked pose, corrected for the drift measured against the patches so far.
         fused.T_W_C_planes = correction_ * *fused.T_W_C;
         const planes::PlaneDetection detection = detector_.detect(fused.frame);

@@ -114,7 +114,10 @@ TEST(Pipeline, RunsEveryGoodFrameAndWritesTheOutputs) {
     ++progress_calls;
     EXPECT_EQ(p.frames_total, 8u);
   };
-  const RunSummary summary = runPipeline(source, loadRunConfig(std::nullopt), options);
+  // Every frame integrated, so that each one's line says so; thinning has its own test below.
+  RunConfig config = loadRunConfig(std::nullopt);
+  config.tsdf.integrate_every_n_frames = 1;
+  const RunSummary summary = runPipeline(source, config, options);
 
   EXPECT_EQ(summary.frames, 7u);
   EXPECT_EQ(summary.frames_bad, 1u);
@@ -207,6 +210,33 @@ TEST(Pipeline, RunsEveryGoodFrameAndWritesTheOutputs) {
   EXPECT_EQ(report["stages"]["integration"]["calls"], 7);
 }
 
+TEST(Pipeline, EveryOtherFrameIsIntegratedAndEveryFrameIsPosed) {
+  // The scripted camera moves 2 cm a frame. Every 2nd posed frame is integrated: 0, 2, then 5
+  // (frame 3 is bad, so 4 is the first after 2, and 4 cm from 2 does not force it), then 7.
+  // Every good frame has its pose in trajectory.txt.
+  const fs::path out = test::freshTempDir();
+  ScriptedSource source(8, {3});
+  RunOptions options;
+  options.out_dir = out;
+  options.poses = PoseSource::kGroundTruth;
+  const RunSummary summary = runPipeline(source, loadRunConfig(std::nullopt), options);
+  EXPECT_EQ(summary.frames, 7u);
+  EXPECT_EQ(summary.frames_integrated + summary.frames_between_integrations, 7u);
+  std::vector<int> integrated;
+  for (const auto& line : readJsonLines(out / "stats.jsonl")) {
+    if (line["type"] == "frame" && line["integrated"].get<bool>()) {
+      integrated.push_back(line["index"]);
+    }
+  }
+  EXPECT_EQ(integrated, (std::vector<int>{0, 2, 5, 7}));
+  EXPECT_EQ(summary.frames_integrated, 4u);
+  std::ifstream trajectory(out / "trajectory.txt");
+  std::string line;
+  int poses = 0;
+  while (std::getline(trajectory, line)) poses += line[0] == '#' ? 0 : 1;
+  EXPECT_EQ(poses, 7);
+}
+
 TEST(Pipeline, ResultDoesNotDependOnThreadCount) {
   std::vector<std::size_t> vertices;
   for (int threads : {1, 2}) {
@@ -264,7 +294,8 @@ TEST(Pipeline, TracksTheRealFastRotatingTumSequenceWithinOneCentimetre) {
   options.out_dir = test::freshTempDir();
   const RunSummary summary = runPipeline(source, RunConfig{}, options);
   EXPECT_EQ(summary.tracking_losses, 0u);
-  EXPECT_EQ(summary.frames_integrated, 40u);
+  EXPECT_EQ(summary.frames_integrated + summary.frames_between_integrations, 40u);
+  EXPECT_GE(summary.frames_integrated, 20u);  // every 2nd, and each after a turn of 3 degrees
   ASSERT_TRUE(summary.ate.has_value());
   EXPECT_EQ(summary.ate->pairs, 40u);
   EXPECT_LT(summary.ate->rmse_m, 0.01);
@@ -290,7 +321,7 @@ TEST(Pipeline, RealTumTexturesRenderAboutAsFaithfullyAsTheMeshOnTrainingAndHeldO
   options.holdout_every = 5;
   const RunSummary summary = runPipeline(source, RunConfig{}, options);
   EXPECT_EQ(summary.frames_held_out, 8u);
-  EXPECT_EQ(summary.frames_integrated, 32u);
+  EXPECT_EQ(summary.frames_integrated + summary.frames_between_integrations, 32u);
   drivers::DatasetSource frames(folder);
   const nlohmann::json figures = eval::evaluateRunViews(options.out_dir, frames, {});
   EXPECT_EQ(figures["view_frames_holdout"], 8);
@@ -316,6 +347,14 @@ TEST(RunConfig, DefaultYamlDocumentsEveryKeyWithTheStructDefaults) {
   EXPECT_EQ(from_file.tsdf.block_resolution, defaults.tsdf.block_resolution);
   EXPECT_EQ(from_file.tsdf.integration_scale, defaults.tsdf.integration_scale);
   EXPECT_EQ(from_file.tsdf.release_distance_m, defaults.tsdf.release_distance_m);
+  EXPECT_EQ(from_file.tsdf.integrate_every_n_frames, defaults.tsdf.integrate_every_n_frames);
+  EXPECT_EQ(from_file.tracker.tracking_scale, defaults.tracker.tracking_scale);
+  EXPECT_EQ(from_file.tracker.keyframe_translation_m, defaults.tracker.keyframe_translation_m);
+  EXPECT_EQ(from_file.tracker.feature_gap_s, defaults.tracker.feature_gap_s);
+  EXPECT_EQ(from_file.tracker.features.max_features, defaults.tracker.features.max_features);
+  EXPECT_EQ(from_file.tracker.features.max_depth_m, defaults.tracker.features.max_depth_m);
+  EXPECT_EQ(from_file.pose_correction.enabled, defaults.pose_correction.enabled);
+  EXPECT_EQ(from_file.patches.colour_every_n_frames, defaults.patches.colour_every_n_frames);
   EXPECT_EQ(from_file.tracker.iterations_per_level, defaults.tracker.iterations_per_level);
   EXPECT_EQ(from_file.tracker.max_translation_m, defaults.tracker.max_translation_m);
   EXPECT_EQ(from_file.tracker.max_rotation_deg, defaults.tracker.max_rotation_deg);

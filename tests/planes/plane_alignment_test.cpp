@@ -7,6 +7,14 @@
 namespace tessera::planes {
 namespace {
 
+// The correction is off by default (it adds error to the keyframe tracker); these tests switch
+// it on.
+PlaneAlignmentConfig enabled() {
+  PlaneAlignmentConfig config;
+  config.enabled = true;
+  return config;
+}
+
 // Points 2 cm apart over a width x height rectangle from `origin` along u and v.
 PlaneObservation rectangle(const Eigen::Vector3d& origin, const Eigen::Vector3d& u,
                            const Eigen::Vector3d& v, double width, double height) {
@@ -58,7 +66,7 @@ TEST(PlaneAlignment, ThreeWallsOfACornerUndoTheDriftOfAFrame) {
   const PatchMap map = establishedMap(corner());
   const Eigen::Vector3d camera(1.5, 1.5, 1.4);
   const core::Isometry M = drift(camera);
-  const auto D = alignToPatches(map, moved(corner(), M), camera, PlaneAlignmentConfig{});
+  const auto D = alignToPatches(map, moved(corner(), M), camera, enabled());
   ASSERT_TRUE(D.has_value());
   const core::Isometry residual = *D * M;
   EXPECT_LT(Eigen::AngleAxisd(residual.linear()).angle() * 180 / M_PI, 0.02);
@@ -72,7 +80,7 @@ TEST(PlaneAlignment, OneFloorCorrectsOnlyHeightAndTiltNeverSlidesAlongIt) {
   const Eigen::Vector3d camera(1.0, 1.0, 1.4);
   core::Isometry M = core::Isometry::Identity();
   M.translation() = Eigen::Vector3d(0.02, 0.01, 0.015);  // slides along the floor and lifts it
-  const auto D = alignToPatches(map, moved(floor, M), camera, PlaneAlignmentConfig{});
+  const auto D = alignToPatches(map, moved(floor, M), camera, enabled());
   ASSERT_TRUE(D.has_value());
   EXPECT_NEAR(D->translation().z(), -0.015, 1e-4);
   EXPECT_NEAR(D->translation().x(), 0.0, 1e-4);  // unconstrained: left alone
@@ -84,15 +92,15 @@ TEST(PlaneAlignment, NoEstablishedPatchOrATooLargeStepGivesNoCorrection) {
   young.add(corner());
   young.endFrame(0);
   const Eigen::Vector3d camera(1.5, 1.5, 1.4);
-  EXPECT_FALSE(alignToPatches(young, corner(), camera, PlaneAlignmentConfig{}).has_value());
+  EXPECT_FALSE(alignToPatches(young, corner(), camera, enabled()).has_value());
 
   const PatchMap map = establishedMap(corner());
   core::Isometry far = core::Isometry::Identity();
   far.translation() = Eigen::Vector3d(0.0, 0.0, 0.025);  // within association, beyond max_step
-  PlaneAlignmentConfig strict;
+  PlaneAlignmentConfig strict = enabled();
   strict.max_step_m = 0.01;
   EXPECT_FALSE(alignToPatches(map, moved(corner(), far), camera, strict).has_value());
-  EXPECT_TRUE(alignToPatches(map, moved(corner(), far), camera, PlaneAlignmentConfig{}).has_value());
+  EXPECT_TRUE(alignToPatches(map, moved(corner(), far), camera, enabled()).has_value());
 }
 
 }  // namespace

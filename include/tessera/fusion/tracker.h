@@ -1,13 +1,16 @@
 #pragma once
 // Camera tracking: RGB-D odometry (OpenCV's RgbdICPOdometry: photometric and point-to-plane ICP
 // terms over a coarse-to-fine pyramid) of each frame against a keyframe, started from a
-// constant-velocity guess, with tracking-loss detection.
+// constant-velocity guess. Across large motions (a gap in time, a failed solve) the guess
+// comes from features (ORB, 3D-2D PnP against the keyframe); after a loss or an interrupted
+// source the frame is relocalised against recent keyframes before tracking goes on.
 #include <memory>
 #include <string>
 #include <vector>
 
 #include "tessera/core/config.h"
 #include "tessera/core/frame.h"
+#include "tessera/fusion/feature_pose.h"
 
 namespace tessera::fusion {
 
@@ -32,16 +35,25 @@ struct TrackerConfig {
   // Start each solve from the last frame-to-frame motion, stretched over the time since the
   // last tracked frame (constant velocity), rather than from no motion.
   bool constant_velocity = true;
+  // A frame taken more than this after the last tracked one (frames dropped, a keyframe
+  // recording) is first posed from features, then refined densely, seconds.
+  double feature_gap_s = 0.05;
+  // Keyframes kept (with their features) to relocalise against after a loss or a reconnect.
+  int relocalisation_keyframes = 10;
+  FeaturePoseConfig features;  // config section tracker_features
 };
 
 void readConfig(const core::ConfigSection& section, TrackerConfig& config);
 
-enum class TrackingStatus { kFirst, kTracked, kLost, kRestarted };
+// kRelocalised: found again against a recent keyframe after a loss or a source interruption.
+// kRestarted: not found again; a new segment starts at the last good pose.
+enum class TrackingStatus { kFirst, kTracked, kLost, kRelocalised, kRestarted };
 
 struct TrackingResult {
   TrackingStatus status = TrackingStatus::kFirst;
   core::Isometry T_W_C = core::Isometry::Identity();  // valid unless kLost
-  std::string problem;                                // why tracking was lost
+  bool from_features = false;  // the solve started from a feature pose
+  std::string problem;         // why tracking was lost
 };
 
 // Not thread-safe: owned by the fusion stage, which runs serially.
@@ -52,6 +64,10 @@ class Tracker {
 
   // The pose of `frame`. The first frame (and a restart) gets `initial_T_W_C`.
   TrackingResult track(const core::Frame& frame, const core::Isometry& initial_T_W_C);
+
+  // The source was interrupted (a device lost and reconnected): the camera may have moved
+  // meanwhile, so the next frame is relocalised rather than tracked from the last pose.
+  void sourceInterrupted();
 
  private:
   struct State;

@@ -80,7 +80,8 @@ struct FusedFrame {
   core::Frame frame;
   bool integrated = false;
   bool held_out = false;                // left out of fusion and texturing (run --holdout-every)
-  bool between_fused = false;  // posed, but not fused (tsdf.integrate_every_n_frames)
+  // Posed and searched for planes, but not integrated (tsdf.integrate_every_n_frames).
+  bool between_integrations = false;
   std::optional<core::Isometry> T_W_C;  // the pose it was fused at
   std::string skip_reason;              // why the frame was not integrated
   std::size_t tsdf_bytes = 0;
@@ -111,6 +112,8 @@ class TrackingStage {
 
   std::size_t trackingLosses() const { return tracking_losses_; }
   std::size_t trackingRestarts() const { return tracking_restarts_; }
+  std::size_t relocalisations() const { return relocalisations_; }
+  std::size_t featurePoses() const { return feature_poses_; }
   const StageTimer& timer() const { return timer_; }
 
  private:
@@ -120,6 +123,8 @@ class TrackingStage {
   PoseSource poses_;
   std::size_t tracking_losses_ = 0;
   std::size_t tracking_restarts_ = 0;
+  std::size_t relocalisations_ = 0;  // found again after a loss or an interrupted source
+  std::size_t feature_poses_ = 0;    // frames whose solve started from a feature pose
   StageTimer timer_;
 };
 
@@ -137,20 +142,20 @@ class IntegrationStage {
   std::size_t framesIntegrated() const { return integrated_; }
   std::size_t framesSkipped() const { return skipped_; }
   std::size_t framesHeldOut() const { return held_out_; }
-  std::size_t framesBetweenFused() const { return between_fused_; }
+  std::size_t framesBetweenIntegrations() const { return between_integrations_; }
   std::size_t blocksReleased() const { return blocks_released_; }
   const StageTimer& timer() const { return timer_; }
 
  private:
-  // Whether the frame posed at T_W_C is fused (TsdfConfig::integrate_every_n_frames).
+  // Whether the frame posed at T_W_C is integrated (TsdfConfig::integrate_every_n_frames).
   bool wantsFrame(const core::Isometry& T_W_C);
 
   fusion::TsdfMap map_;
   int holdout_every_;
-  std::optional<core::Isometry> last_fused_pose_;
-  int posed_since_fused_ = 0;
+  std::optional<core::Isometry> last_integrated_pose_;
+  int posed_since_integrated_ = 0;
   std::size_t held_out_ = 0;
-  std::size_t between_fused_ = 0;
+  std::size_t between_integrations_ = 0;
   std::size_t integrated_ = 0;
   std::size_t skipped_ = 0;
   std::size_t blocks_released_ = 0;
