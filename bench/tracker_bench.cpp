@@ -49,6 +49,7 @@ int main(int argc, char** argv) {
       ->check(CLI::IsMember({1, 2, 4}));
   app.add_option("--keyframe-m", config.keyframe_translation_m, "Keyframe after this motion");
   app.add_option("--keyframe-deg", config.keyframe_rotation_deg, "Keyframe after this turn");
+  app.add_option("--feature-gap", config.feature_gap_s, "Pose from features first after this gap, s");
   app.add_option("--iterations", iterations, "Iterations per pyramid level, finest first");
   app.add_flag("--no-velocity", no_velocity, "Start each solve from no motion");
   app.add_flag("--verbose", verbose, "Print each frame whose step is off by more than 5 mm");

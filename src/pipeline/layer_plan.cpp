@@ -115,15 +115,15 @@ match::Fidelity layeredFidelity(const match::TextureDescription& bitmap, const L
   return match::measureFidelity(bitmap.rgb, bitmap.mask, shown);
 }
 
-void MatchStage::findPattern(MatchedPatch& matched) const {
+void findPattern(const LayerPlanner& planner, MatchedPatch& matched) {
   const match::TextureDescription& bitmap = *matched.description;
   try {
     pattern::PatternAnalysis analysis =
-        pattern::analysePattern(bitmap.rgb, bitmap.mask, planner_.config().extractor);
-    matched.pattern_ms = analysis.ms;
+        pattern::analysePattern(bitmap.rgb, bitmap.mask, planner.config().extractor);
+    matched.pattern_ms += analysis.ms;
     if (!analysis.pattern) return;
     const auto start = std::chrono::steady_clock::now();
-    matched.layers = planner_.planPattern(bitmap, std::move(*analysis.pattern));
+    matched.layers = planner.planPattern(bitmap, std::move(*analysis.pattern));
     matched.pattern_ms += msSince(start);
   } catch (const std::exception& e) {  // the bitmap is then stored as it is
     spdlog::warn("patch {} version {}: no layers: {}", matched.bitmap->id, matched.bitmap->version,

@@ -124,7 +124,7 @@ MatchedPatch MatchStage::process(const PatchJob& job) const {
     matched.description.reset();
     return matched;
   }
-  if (!matched.decision.match && planner_.config().enabled) findPattern(matched);
+  if (!matched.decision.match && planner_.config().enabled) findPattern(planner_, matched);
   return matched;
 }
 
@@ -156,32 +156,49 @@ std::vector<match::CandidateVerdict> CommitStage::allVerdicts(const MatchedPatch
   return verdicts;
 }
 
-std::optional<match::CandidateVerdict> CommitStage::recheck(
-    const match::TextureDescription& query, const std::optional<match::CandidateVerdict>& found,
-    std::int64_t snapshot_id, std::size_t& newer_passing) const {
+std::optional<match::CandidateVerdict> CommitStage::recheck(const MatchedPatch& matched,
+                                                            std::size_t& newer_passing) const {
+  // The max_candidates textures nearest in CCV among everything stored so far, in the order
+  // the matcher takes them, the first accepted winning: the matcher's verdicts stand for the
+  // textures it saw (every one before the one it accepted was refused), the cascade runs on
+  // those committed since its snapshot. A newer texture that pushes the matcher's choice out of
+  // the nearest max_candidates takes it out of the running, as it would have in order.
+  struct Entry {
+    double distance;
+    std::int64_t id;
+    const match::CandidateVerdict* seen;  // the matcher's verdict, or null for a newer texture
+  };
+  const match::TextureDescription& query = *matched.description;
   const double bound = cascade_.config().ccv_max_distance;
-  const double limit = found ? found->ccv_distance : bound;
-  std::vector<match::CcvNeighbour> newer;
+  std::vector<Entry> entries;
+  for (const match::CandidateVerdict& verdict : matched.decision.verdicts) {
+    entries.push_back({verdict.ccv_distance, verdict.id, &verdict});
+  }
   newer_passing = 0;
   for (const auto& texture : committed_) {
-    if (texture->id <= snapshot_id) continue;
+    if (texture->id <= matched.snapshot_id) continue;
     const double d = match::ccvDistance(query.ccv.values, texture->description.ccv.values);
-    newer_passing += d <= bound ? 1 : 0;
-    const bool nearer = found ? d < limit : d <= limit;
-    if (nearer) newer.push_back({texture->id, d});
+    if (d > bound) continue;
+    ++newer_passing;
+    entries.push_back({d, texture->id, nullptr});
   }
-  std::sort(newer.begin(), newer.end(), [](const auto& a, const auto& b) {
+  std::sort(entries.begin(), entries.end(), [](const Entry& a, const Entry& b) {
     return a.distance != b.distance ? a.distance < b.distance : a.id < b.id;
   });
-  if (newer.size() > cascade_.config().max_candidates)
-    newer.resize(cascade_.config().max_candidates);
-  for (const match::CcvNeighbour& candidate : newer) {
+  if (entries.size() > cascade_.config().max_candidates) {
+    entries.resize(cascade_.config().max_candidates);
+  }
+  for (const Entry& entry : entries) {
+    if (entry.seen != nullptr) {
+      if (entry.seen->accepted) return *entry.seen;
+      continue;
+    }
     const auto stored = std::find_if(committed_.begin(), committed_.end(),
-                                     [&](const auto& t) { return t->id == candidate.id; });
-    match::CandidateVerdict verdict = cascade_.tryCandidate(query, **stored, candidate.distance);
+                                     [&](const auto& t) { return t->id == entry.id; });
+    match::CandidateVerdict verdict = cascade_.tryCandidate(query, **stored, entry.distance);
     if (verdict.accepted) return verdict;
   }
-  return found;
+  return std::nullopt;
 }
 
 std::int64_t CommitStage::addTexture(
@@ -226,36 +243,21 @@ bool CommitStage::planCommit(const MatchedPatch& matched, db::Commit& commit,
                              CommitRecord& record) const {
   const texture::PatchBitmap& bitmap = *matched.bitmap;
   LayerPlan plan = *matched.layers;
-  bool changed = false;
-  std::size_t ignored = 0;
-  if (!plan.base_reuse) {  // a pattern committed since the snapshot may show the rest
-    const match::TextureDescription& rest = plan.base ? *plan.base : *matched.description;
-    std::vector<PatternCandidate> candidates;
-    for (const auto& texture : committed_) {
-      if (texture->id <= matched.snapshot_id || !texture->pattern) continue;
-      const double d = match::ccvDistance(rest.ccv.values, texture->description.ccv.values);
-      if (d <= cascade_.config().ccv_max_distance) candidates.push_back({texture, d});
+  if (plan.found && catalog_.newestId() > matched.snapshot_id) {
+    // Textures were committed after the matcher's snapshot: the pattern plan is made again over
+    // all of them, so that the outcome is the one a matcher that saw every earlier commit
+    // would have reached, whatever the threads' timing (patching the old plan with the newer
+    // textures left one or two threads storing different textures under load).
+    const auto start = std::chrono::steady_clock::now();
+    std::optional<LayerPlan> again;
+    try {
+      again = planner_.planPattern(*matched.description, *plan.found);
+    } catch (const std::exception& e) {  // then stored whole
+      spdlog::warn("patch {} version {}: no layers: {}", bitmap.id, bitmap.version, e.what());
     }
-    std::sort(candidates.begin(), candidates.end(), [](const auto& a, const auto& b) {
-      return a.ccv_distance != b.ccv_distance ? a.ccv_distance < b.ccv_distance
-                                              : a.texture->id < b.texture->id;
-    });
-    plan.base_reuse = reuseStoredPattern(*plan.found, rest, candidates, cascade_.config());
-    changed |= plan.base_reuse.has_value();
-  }
-  for (OverlayMatch& overlay : plan.overlays) {
-    auto found = recheck(overlay.description, overlay.decision.match, matched.snapshot_id, ignored);
-    changed |= found.has_value() != overlay.decision.match.has_value() ||
-               (found && found->id != overlay.decision.match->id);
-    overlay.decision.match = found;
-  }
-  // Then the fidelity is that of what is committed; a plan that lost it stores the bitmap.
-  if (changed) {
-    plan.fidelity = layeredFidelity(*matched.description, plan, catalog_);
-    if (plan.fidelity.psnr_db < cascade_.config().min_psnr_db ||
-        plan.fidelity.coverage < cascade_.config().min_coverage) {
-      return false;
-    }
+    record.pattern_ms += msSince(start);
+    if (!again) return false;
+    plan = std::move(*again);
   }
 
   db::TextureInstance base;
@@ -328,9 +330,7 @@ CommitRecord CommitStage::process(MatchedPatch matched) {
   db::Commit commit;
   std::size_t newer_passing = 0;
   const std::optional<match::CandidateVerdict> reuse =
-      cascade_.config().enabled ? recheck(*matched.description, matched.decision.match,
-                                          matched.snapshot_id, newer_passing)
-                                : std::nullopt;
+      cascade_.config().enabled ? recheck(matched, newer_passing) : std::nullopt;
   if (cascade_.config().enabled) {
     // As if every earlier patch had been committed before this one was matched, whatever the
     // matcher's snapshot held: the prefilter considered every texture stored so far and let
@@ -341,6 +341,14 @@ CommitRecord CommitStage::process(MatchedPatch matched) {
     record.ccv_removed = record.ccv_considered - std::min(passing, record.ccv_considered);
     ccv_considered_ += record.ccv_considered;
     ccv_removed_ += record.ccv_removed;
+  }
+  if (!reuse && matched.decision.match && !matched.layers && cascade_.config().enabled &&
+      planner_.config().enabled) {
+    // The matcher's choice fell out of the nearest textures once the newer ones counted, so it
+    // never looked for a pattern: looked for here, as a matcher that saw them would have.
+    findPattern(planner_, matched);
+    matched.snapshot_id = catalog_.newestId();
+    record.pattern_ms = matched.pattern_ms;
   }
   // A bitmap that nothing shows whole may be a stored texture with some regions changed (the
   // same plaster, another poster on it): planned here, where every earlier texture is known,

@@ -150,6 +150,10 @@ class LayerPlanner {
   pattern::PatternStageConfig patterns_;
 };
 
+// A periodic pattern in the matched bitmap, and its layer plan into matched.layers (none when
+// the bitmap is not periodic or the analysis fails). Adds its time to matched.pattern_ms.
+void findPattern(const LayerPlanner& planner, MatchedPatch& matched);  // layer_plan.cpp
+
 // Builds each patch's bitmap, describes it and matches it; a bitmap that matches nothing is
 // analysed for a periodic pattern (thread-safe: many at once). Partial reuses are planned at
 // commit, where every earlier texture is known.
@@ -164,8 +168,6 @@ class MatchStage {
   MatchedPatch process(const PatchJob& job) const;
 
  private:
-  void findPattern(MatchedPatch& matched) const;  // layer_plan.cpp
-
   const TextureStage& textures_;
   const match::MatchCascade& cascade_;
   const StoreCatalog& catalog_;
@@ -229,12 +231,11 @@ class CommitStage {
   const StageTimer& timer() const { return timer_; }
 
  private:
-  // The cascade over textures committed after the matcher's snapshot, nearer in CCV than the
-  // candidate it accepted (all of them when it accepted none); `newer_passing` gets how many
-  // of those textures are within the prefilter's bound.
-  std::optional<match::CandidateVerdict> recheck(
-      const match::TextureDescription& query, const std::optional<match::CandidateVerdict>& found,
-      std::int64_t snapshot_id, std::size_t& newer_passing) const;
+  // The match as if every earlier patch had been committed before this one was matched: the
+  // matcher's verdicts merged with the cascade's on textures committed since its snapshot;
+  // `newer_passing` gets how many of those are within the prefilter's bound.
+  std::optional<match::CandidateVerdict> recheck(const MatchedPatch& matched,
+                                                 std::size_t& newer_passing) const;
   // The verdicts on the max_candidates textures nearest in CCV among all stored so far: the
   // matcher's, and the cascade's on textures committed since its snapshot.
   std::vector<match::CandidateVerdict> allVerdicts(const MatchedPatch& matched) const;
