@@ -49,7 +49,8 @@ int main(int argc, char** argv) {
       ->check(CLI::IsMember({1, 2, 4}));
   app.add_option("--keyframe-m", config.keyframe_translation_m, "Keyframe after this motion");
   app.add_option("--keyframe-deg", config.keyframe_rotation_deg, "Keyframe after this turn");
-  app.add_option("--feature-gap", config.feature_gap_s, "Pose from features first after this gap, s");
+  app.add_option("--feature-gap", config.feature_gap_s,
+                 "Pose from features first after this gap, s");
   app.add_option("--iterations", iterations, "Iterations per pyramid level, finest first");
   app.add_flag("--no-velocity", no_velocity, "Start each solve from no motion");
   app.add_flag("--verbose", verbose, "Print each frame whose step is off by more than 5 mm");
@@ -65,7 +66,8 @@ int main(int argc, char** argv) {
     std::optional<tessera::core::Intrinsics> intrinsics;
     if (!intrinsics_spec.empty()) intrinsics = tessera::core::parseIntrinsicsSpec(intrinsics_spec);
     source_path = bench::resolvedSource(source_path);
-    const auto all = bench::loadFrames(source_path, max_frames, true, intrinsics, depth_units_per_m);
+    const auto all =
+        bench::loadFrames(source_path, max_frames, true, intrinsics, depth_units_per_m);
     fusion::Tracker tracker(config);
     tessera::eval::Trajectory estimate, truth;
     std::vector<double> ms;
@@ -76,9 +78,9 @@ int main(int argc, char** argv) {
       truth[frame.timestamp_ns] = *frame.T_W_C_gt;
       const auto start = std::chrono::steady_clock::now();
       const fusion::TrackingResult result = tracker.track(frame, *all.front().T_W_C_gt);
-      ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() -
-                                                             start)
-                       .count());
+      ms.push_back(
+          std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
+              .count());
       if (result.status == fusion::TrackingStatus::kLost) {
         if (verbose) fmt::print("frame {}: lost: {}\n", frame.index, result.problem);
         ++lost;
@@ -96,7 +98,9 @@ int main(int argc, char** argv) {
         const auto true_step = truth.at(last_ns).inverse() * *frame.T_W_C_gt;
         const double error_mm = (step.translation() - true_step.translation()).norm() * 1e3;
         worst_step = std::max(worst_step, {error_mm, frame.index});
-        if (verbose && error_mm > 5.0) fmt::print("frame {}: step off by {:.1f} mm\n", frame.index, error_mm);
+        if (verbose && error_mm > 5.0) {
+          fmt::print("frame {}: step off by {:.1f} mm\n", frame.index, error_mm);
+        }
       }
       estimate[frame.timestamp_ns] = result.T_W_C;
     }
@@ -107,7 +111,8 @@ int main(int argc, char** argv) {
     const auto ate = tessera::eval::absoluteTrajectoryError(estimate, truth);
     fmt::print(
         "{}: {} frames (every {}), scale {}, iterations [{}], velocity {}: {:.1f} ms/frame mean, "
-        "{:.1f} median; lost {}, relocalised {}, restarts {}; worst step {:.1f} mm (frame {}); ATE {}\n",
+        "{:.1f} median; lost {}, relocalised {}, restarts {}; worst step {:.1f} mm (frame {}); "
+        "ATE {}\n",
         source_path, ms.size(), every, config.tracking_scale,
         fmt::join(config.iterations_per_level, ","), config.constant_velocity ? "on" : "off", mean,
         sorted[sorted.size() / 2], lost, relocalised, restarts, worst_step.first, worst_step.second,

@@ -4,8 +4,8 @@
 #include <cmath>
 #include <cstdint>
 #include <deque>
-#include <memory>
 #include <limits>
+#include <memory>
 #include <optional>
 
 #include <fmt/format.h>
@@ -48,10 +48,12 @@ void readConfig(const core::ConfigSection& section, TrackerConfig& config) {
     throw core::ConfigError("tracker: tracking_scale must be 1, 2 or 4");
   }
   if (config.feature_gap_s <= 0.0 || config.relocalisation_keyframes < 1) {
-    throw core::ConfigError("tracker: feature_gap_s must be positive and relocalisation_keyframes >= 1");
+    throw core::ConfigError(
+        "tracker: feature_gap_s must be positive and relocalisation_keyframes >= 1");
   }
   if (config.keyframe_translation_m < 0.0 || config.keyframe_rotation_deg < 0.0) {
-    throw core::ConfigError("tracker: keyframe_translation_m and keyframe_rotation_deg must be >= 0");
+    throw core::ConfigError(
+        "tracker: keyframe_translation_m and keyframe_rotation_deg must be >= 0");
   }
 }
 
@@ -260,8 +262,7 @@ TrackingResult Tracker::track(const core::Frame& frame, const core::Isometry& in
     s.reference = keyframe;
     return true;
   };
-  const auto accept = [&](TrackingStatus status, const core::Isometry& T_W_C,
-                          std::int64_t gap_ns) {
+  const auto accept = [&](TrackingStatus status, const core::Isometry& T_W_C, std::int64_t gap_ns) {
     if (gap_ns > 0 && status == TrackingStatus::kTracked) {
       s.last_motion = T_W_C.inverse() * s.T_W_previous;
       s.last_motion_ns = gap_ns;
@@ -327,8 +328,8 @@ TrackingResult Tracker::track(const core::Frame& frame, const core::Isometry& in
     Eigen::Matrix4d T;
     cv::cv2eigen(Rt, T);
     const core::Isometry T_key_current = rigid(T);
-    if (depthAgreement(current.depth_small, key.images.depth_small, s.camera_matrix,
-                       T_key_current, config_.max_depth_difference_m) < kMinDepthAgreement) {
+    if (depthAgreement(current.depth_small, key.images.depth_small, s.camera_matrix, T_key_current,
+                       config_.max_depth_difference_m) < kMinDepthAgreement) {
       result.problem = "odometry converged to a pose the depths disagree with";
       return std::nullopt;
     }

@@ -129,7 +129,8 @@ IntegrationStage::IntegrationStage(const fusion::TsdfConfig& tsdf, int thread_ca
 
 bool IntegrationStage::wantsFrame(const core::Isometry& T_W_C) {
   ++posed_since_integrated_;
-  bool wanted = !last_integrated_pose_ || posed_since_integrated_ >= map_.config().integrate_every_n_frames;
+  bool wanted =
+      !last_integrated_pose_ || posed_since_integrated_ >= map_.config().integrate_every_n_frames;
   if (!wanted) {
     // A frame far from the last one integrated (sparse keyframes, dropped frames) always is.
     const core::Isometry motion = last_integrated_pose_->inverse() * T_W_C;

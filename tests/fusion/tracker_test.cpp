@@ -208,8 +208,8 @@ TEST(Tracker, TracksTheRealDiningRoomKeyframesWithinTenCentimetres) {
     const core::Frame frame = core::withRegisteredColour(std::move(read.frame));
     if (!first) first = *frame.T_W_C_gt;
     const TrackingResult result = tracker.track(frame, *first);
-    ASSERT_NE(result.status, TrackingStatus::kLost) << "frame " << frame.index << ": "
-                                                    << result.problem;
+    ASSERT_NE(result.status, TrackingStatus::kLost)
+        << "frame " << frame.index << ": " << result.problem;
     estimate[frame.timestamp_ns] = result.T_W_C;
     truth[frame.timestamp_ns] = *frame.T_W_C_gt;
   }

@@ -20,7 +20,8 @@ PlaneObservation rectangle(const Eigen::Vector3d& origin, const Eigen::Vector3d&
                            const Eigen::Vector3d& v, double width, double height) {
   PlaneObservation observation;
   for (double a = 0.0; a <= width; a += 0.02) {
-    for (double b = 0.0; b <= height; b += 0.02) observation.points_W.push_back(origin + a * u + b * v);
+    for (double b = 0.0; b <= height; b += 0.02)
+      observation.points_W.push_back(origin + a * u + b * v);
   }
   return observation;
 }

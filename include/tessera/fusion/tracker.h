@@ -22,7 +22,7 @@ struct TrackerConfig {
   // is a tracking loss.
   double max_translation_m = 0.15;
   double max_rotation_deg = 15.0;
-  int lost_frames_before_restart = 10;   // then tracking restarts from the current frame
+  int lost_frames_before_restart = 10;  // then tracking restarts from the current frame
   // Gauss-Newton iterations per pyramid level, finest level first; the level count follows.
   std::vector<int> iterations_per_level = {2, 3, 4};
   // Odometry runs on blocks of N x N pixels: 2 tracks 640x480 frames at 320x240, a quarter of
@@ -52,8 +52,8 @@ enum class TrackingStatus { kFirst, kTracked, kLost, kRelocalised, kRestarted };
 struct TrackingResult {
   TrackingStatus status = TrackingStatus::kFirst;
   core::Isometry T_W_C = core::Isometry::Identity();  // valid unless kLost
-  bool from_features = false;  // the solve started from a feature pose
-  std::string problem;         // why tracking was lost
+  bool from_features = false;                         // the solve started from a feature pose
+  std::string problem;                                // why tracking was lost
 };
 
 // Not thread-safe: owned by the fusion stage, which runs serially.

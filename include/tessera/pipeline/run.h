@@ -44,12 +44,12 @@ struct RunSummary {
   std::size_t frames_held_out = 0;  // posed but not fused or textured (--holdout-every)
   // Posed and searched for planes, not integrated (tsdf.integrate_every_n_frames).
   std::size_t frames_between_integrations = 0;
-  std::string poses;                // "track" or "gt"
+  std::string poses;  // "track" or "gt"
   std::size_t tracking_losses = 0;
   std::size_t tracking_restarts = 0;
   std::size_t relocalisations = 0;  // tracking found again against a recent keyframe
   std::size_t feature_poses = 0;    // frames posed from features first (large motion)
-  std::string source_end_problem;  // non-empty when the source ended abnormally
+  std::string source_end_problem;   // non-empty when the source ended abnormally
   // Live sources only (docs/METRICS.md): what the device sent and what the pipeline missed.
   bool live = false;
   core::LiveStats live_stats;

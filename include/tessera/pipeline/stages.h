@@ -79,7 +79,7 @@ struct TrackedFrame {
 struct FusedFrame {
   core::Frame frame;
   bool integrated = false;
-  bool held_out = false;                // left out of fusion and texturing (run --holdout-every)
+  bool held_out = false;  // left out of fusion and texturing (run --holdout-every)
   // Posed and searched for planes, but not integrated (tsdf.integrate_every_n_frames).
   bool between_integrations = false;
   std::optional<core::Isometry> T_W_C;  // the pose it was fused at

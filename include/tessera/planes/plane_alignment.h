@@ -12,12 +12,12 @@
 namespace tessera::planes {
 
 struct PlaneAlignmentConfig {
-  bool enabled = false;  // adds error to the keyframe tracker (config/default.yaml)
+  bool enabled = false;            // adds error to the keyframe tracker (config/default.yaml)
   double min_patch_area_m2 = 0.5;  // only patches this large ...
   int min_patch_frames = 15;       // ... and seen in this many frames anchor the pose
   int points_per_region = 400;     // points of each region used (evenly spread)
   double max_step_m = 0.03;        // a larger correction in one frame (camera motion) is not
-  double max_step_deg = 1.5;      // trusted: the region was probably matched wrongly
+  double max_step_deg = 1.5;       // trusted: the region was probably matched wrongly
 };
 
 // The rigid motion D (applied on the left, world frame) that best moves the observations onto
