@@ -1,5 +1,7 @@
 #include "tessera/core/pose.h"
 
+#include <cmath>
+
 namespace tessera::core {
 
 Isometry isometryFromTranslationQuaternion(const Eigen::Vector3d& t, double qx, double qy,
@@ -17,6 +19,10 @@ Isometry interpolate(const Isometry& a, const Isometry& b, double alpha) {
   T.linear() = qa.slerp(alpha, qb).toRotationMatrix();
   T.translation() = (1.0 - alpha) * a.translation() + alpha * b.translation();
   return T;
+}
+
+double rotationAngleDeg(const Isometry& T) {
+  return Eigen::AngleAxisd(T.linear()).angle() * 180.0 / M_PI;
 }
 
 }  // namespace tessera::core

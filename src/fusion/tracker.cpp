@@ -137,10 +137,6 @@ core::Isometry rigid(const Eigen::Matrix4d& T) {
   return out;
 }
 
-double angleDeg(const core::Isometry& T) {
-  return Eigen::AngleAxisd(T.linear()).angle() * 180.0 / M_PI;
-}
-
 // The share of `depth_a`'s points (every 4th pixel) that, moved by T_b_a and projected into
 // camera b, land on a depth of `depth_b` within `tolerance_m`; among those that land on any.
 double depthAgreement(const cv::Mat& depth_a, const cv::Mat& depth_b, const cv::Matx33d& K,
@@ -399,7 +395,7 @@ TrackingResult Tracker::track(const core::Frame& frame, const core::Isometry& in
   const core::Isometry T_key_current = s.reference->T_W_C.inverse() * *T_W_C;
   accept(status, *T_W_C, gap_ns);
   if (T_key_current.translation().norm() > config_.keyframe_translation_m ||
-      angleDeg(T_key_current) > config_.keyframe_rotation_deg) {
+      core::rotationAngleDeg(T_key_current) > config_.keyframe_rotation_deg) {
     makeKeyframe(current, *T_W_C);
   }
   return result;

@@ -15,6 +15,17 @@
 
 namespace tessera::pipeline {
 
+namespace {
+
+// A frame this far from a reference one (5 cm or 3 degrees: a recording of sparse keyframes,
+// dropped frames) is always integrated and always gives colour samples.
+bool farFrom(const core::Isometry& T_W_reference, const core::Isometry& T_W_C) {
+  const core::Isometry motion = T_W_reference.inverse() * T_W_C;
+  return motion.translation().norm() > 0.05 || core::rotationAngleDeg(motion) > 3.0;
+}
+
+}  // namespace
+
 SourceStage::SourceStage(core::FrameSource& source, std::optional<std::size_t> max_frames,
                          const std::atomic<bool>* stop)
     : source_(source), max_frames_(max_frames), stop_(stop) {}
@@ -129,14 +140,9 @@ IntegrationStage::IntegrationStage(const fusion::TsdfConfig& tsdf, int thread_ca
 
 bool IntegrationStage::wantsFrame(const core::Isometry& T_W_C) {
   ++posed_since_integrated_;
-  bool wanted =
-      !last_integrated_pose_ || posed_since_integrated_ >= map_.config().integrate_every_n_frames;
-  if (!wanted) {
-    // A frame far from the last one integrated (sparse keyframes, dropped frames) always is.
-    const core::Isometry motion = last_integrated_pose_->inverse() * T_W_C;
-    const double angle_deg = Eigen::AngleAxisd(motion.linear()).angle() * 180.0 / M_PI;
-    wanted = motion.translation().norm() > 0.05 || angle_deg > 3.0;
-  }
+  const bool wanted = !last_integrated_pose_ ||
+                      posed_since_integrated_ >= map_.config().integrate_every_n_frames ||
+                      farFrom(*last_integrated_pose_, T_W_C);
   if (wanted) {
     last_integrated_pose_ = T_W_C;
     posed_since_integrated_ = 0;
@@ -204,10 +210,7 @@ PlaneStage::PlaneStage(const planes::PlaneDetectorConfig& detector,
 bool PlaneStage::wantsColours(std::uint64_t index, const core::Isometry& T_W_C) const {
   const auto every = static_cast<std::uint64_t>(map_.config().colour_every_n_frames);
   if (!last_colour_pose_ || index % every == 0) return true;
-  // A frame far from the last one sampled (a recording of sparse keyframes) is always used.
-  const core::Isometry motion = last_colour_pose_->inverse() * T_W_C;
-  const double angle_deg = Eigen::AngleAxisd(motion.linear()).angle() * 180.0 / M_PI;
-  return motion.translation().norm() > 0.05 || angle_deg > 3.0;
+  return farFrom(*last_colour_pose_, T_W_C);
 }
 
 std::optional<Eigen::Vector3f> PlaneStage::sampleColours(const core::Frame& frame,

@@ -16,4 +16,7 @@ Isometry isometryFromTranslationQuaternion(const Eigen::Vector3d& t, double qx, 
 // alpha = 0 gives a, alpha = 1 gives b.
 Isometry interpolate(const Isometry& a, const Isometry& b, double alpha);
 
+// The angle of T's rotation, degrees.
+double rotationAngleDeg(const Isometry& T);
+
 }  // namespace tessera::core
