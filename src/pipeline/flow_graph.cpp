@@ -10,37 +10,60 @@ namespace tessera::pipeline {
 
 namespace flow = oneapi::tbb::flow;
 
+namespace {
+
+// A message with its frame's place in the stream.
+template <class T>
+struct Numbered {
+  std::uint64_t number = 0;
+  T item;
+};
+
+}  // namespace
+
 int defaultThreadCount() {
   const unsigned hardware = std::thread::hardware_concurrency();
   return hardware == 0 ? 1 : static_cast<int>(hardware);
 }
 
 void runGraph(SourceStage& source, TrackingStage& tracking, IntegrationStage& integration,
-              PlaneStage& planes, TextureStage& textures, const MatchStage& matcher,
+              PlaneStage& planes, TextureStage& textures, const DescribeStage& describer,
               CommitStage& committer, StatsSink& sink, const GraphOptions& options) {
   const int threads = options.threads > 0 ? options.threads : defaultThreadCount();
   oneapi::tbb::task_arena arena(threads);
   arena.execute([&] {
     flow::graph graph;
 
-    flow::input_node<core::Frame> source_node(graph, [&](oneapi::tbb::flow_control& control) {
-      std::optional<core::Frame> frame = source.next();
-      if (!frame) {
-        control.stop();
-        return core::Frame{};
-      }
-      return std::move(*frame);
-    });
+    // Each frame gets a number at the source, and a sequencer in front of each serial stage
+    // hands it the frames in that order: a serial function_node alone does not keep the order
+    // its messages came in, and a plane stage that saw two frames swapped found other patches.
+    std::uint64_t next_frame = 0;
+    flow::input_node<Numbered<core::Frame>> source_node(
+        graph, [&](oneapi::tbb::flow_control& control) {
+          std::optional<core::Frame> frame = source.next();
+          if (!frame) {
+            control.stop();
+            return Numbered<core::Frame>{};
+          }
+          return Numbered<core::Frame>{next_frame++, std::move(*frame)};
+        });
     // Replay: never drop a frame; hold the source back instead.
-    flow::limiter_node<core::Frame> limiter(graph,
-                                            static_cast<std::size_t>(options.max_frames_in_flight));
+    flow::limiter_node<Numbered<core::Frame>> limiter(
+        graph, static_cast<std::size_t>(options.max_frames_in_flight));
     // Serial stages in a row: while frame N is integrated, frame N+1 is tracked and frame N-1
     // goes through plane detection.
-    flow::function_node<core::Frame, TrackedFrame> tracking_node(
-        graph, flow::serial, [&](core::Frame frame) { return tracking.process(std::move(frame)); });
-    flow::function_node<TrackedFrame, FusedFrame> integration_node(
-        graph, flow::serial,
-        [&](TrackedFrame tracked) { return integration.process(std::move(tracked)); });
+    auto numbered = [](const auto& message) { return message.number; };
+    flow::sequencer_node<Numbered<core::Frame>> to_tracking(graph, numbered);
+    flow::function_node<Numbered<core::Frame>, Numbered<TrackedFrame>> tracking_node(
+        graph, flow::serial, [&](Numbered<core::Frame> frame) {
+          return Numbered<TrackedFrame>{frame.number, tracking.process(std::move(frame.item))};
+        });
+    flow::sequencer_node<Numbered<TrackedFrame>> to_integration(graph, numbered);
+    flow::function_node<Numbered<TrackedFrame>, Numbered<FusedFrame>> integration_node(
+        graph, flow::serial, [&](Numbered<TrackedFrame> tracked) {
+          return Numbered<FusedFrame>{tracked.number, integration.process(std::move(tracked.item))};
+        });
+    flow::sequencer_node<Numbered<FusedFrame>> to_planes(graph, numbered);
     // The plane stage sends the frame on to the sink and each patch it finalized to texturing,
     // numbered in finalization order.
     std::size_t next_sequence = 0, next_batch = 0;
@@ -55,44 +78,51 @@ void runGraph(SourceStage& source, TrackingStage& tracking, IntegrationStage& in
       patches.clear();
       return jobs;
     };
-    using PlanesNode = flow::multifunction_node<FusedFrame, std::tuple<FusedFrame, PatchJob>>;
+    using PlanesNode =
+        flow::multifunction_node<Numbered<FusedFrame>, std::tuple<Numbered<FusedFrame>, PatchJob>>;
     PlanesNode planes_node(
-        graph, flow::serial, [&](FusedFrame fused, PlanesNode::output_ports_type& out) {
-          fused = planes.process(std::move(fused));
-          for (PatchJob& job : jobsOf(fused.finalized_patches, fused.frame.index)) {
+        graph, flow::serial, [&](Numbered<FusedFrame> fused, PlanesNode::output_ports_type& out) {
+          fused.item = planes.process(std::move(fused.item));
+          for (PatchJob& job : jobsOf(fused.item.finalized_patches, fused.item.frame.index)) {
             std::get<1>(out).try_put(std::move(job));
           }
           std::get<0>(out).try_put(std::move(fused));
         });
-    // Bitmaps are built and matched independently: as many at once as there are free threads,
-    // off the frame path. They are committed one at a time, in finalization order.
-    flow::function_node<PatchJob, MatchedPatch> match_node(
-        graph, flow::unlimited, [&](const PatchJob& job) { return matcher.process(job); });
-    flow::sequencer_node<MatchedPatch> in_order(
-        graph, [](const MatchedPatch& matched) { return matched.sequence; });
-    flow::function_node<MatchedPatch, flow::continue_msg> commit_node(
-        graph, flow::serial, [&](MatchedPatch matched) {
-          const MatchedPatch::Batch batch = matched.batchInfo();
-          std::optional<texture::PatchBitmap> bitmap = matched.bitmap;
-          const CommitRecord record = committer.process(std::move(matched));
+    // Bitmaps are built and described independently: as many at once as there are free
+    // threads, off the frame path. They are matched and committed one at a time, in
+    // finalization order.
+    flow::function_node<PatchJob, DescribedPatch> describe_node(
+        graph, flow::unlimited, [&](const PatchJob& job) { return describer.process(job); });
+    flow::sequencer_node<DescribedPatch> in_order(
+        graph, [](const DescribedPatch& described) { return described.sequence; });
+    flow::function_node<DescribedPatch, flow::continue_msg> commit_node(
+        graph, flow::serial, [&](DescribedPatch described) {
+          const DescribedPatch::Batch batch = described.batchInfo();
+          std::optional<texture::PatchBitmap> bitmap = described.bitmap;
+          const CommitRecord record = committer.process(std::move(described));
           textures.keep(std::move(bitmap));
           sink.writeCommit(record, batch.index, batch.size, batch.frame_index,
                            committer.texturesStored());
           return flow::continue_msg{};
         });
-    flow::function_node<FusedFrame, flow::continue_msg> sink_node(graph, flow::serial,
-                                                                  [&](const FusedFrame& fused) {
-                                                                    sink.process(fused);
-                                                                    return flow::continue_msg{};
-                                                                  });
+    flow::sequencer_node<Numbered<FusedFrame>> to_sink(graph, numbered);
+    flow::function_node<Numbered<FusedFrame>, flow::continue_msg> sink_node(
+        graph, flow::serial, [&](const Numbered<FusedFrame>& fused) {
+          sink.process(fused.item);
+          return flow::continue_msg{};
+        });
 
     flow::make_edge(source_node, limiter);
-    flow::make_edge(limiter, tracking_node);
-    flow::make_edge(tracking_node, integration_node);
-    flow::make_edge(integration_node, planes_node);
-    flow::make_edge(flow::output_port<0>(planes_node), sink_node);
-    flow::make_edge(flow::output_port<1>(planes_node), match_node);
-    flow::make_edge(match_node, in_order);
+    flow::make_edge(limiter, to_tracking);
+    flow::make_edge(to_tracking, tracking_node);
+    flow::make_edge(tracking_node, to_integration);
+    flow::make_edge(to_integration, integration_node);
+    flow::make_edge(integration_node, to_planes);
+    flow::make_edge(to_planes, planes_node);
+    flow::make_edge(flow::output_port<0>(planes_node), to_sink);
+    flow::make_edge(to_sink, sink_node);
+    flow::make_edge(flow::output_port<1>(planes_node), describe_node);
+    flow::make_edge(describe_node, in_order);
     flow::make_edge(in_order, commit_node);
     flow::make_edge(sink_node, limiter.decrementer());
 
@@ -103,7 +133,7 @@ void runGraph(SourceStage& source, TrackingStage& tracking, IntegrationStage& in
     std::vector<planes::PatchSnapshot> finalized;
     sink.writePatchEvents(planes.finish(finalized));
     const std::uint64_t end_index = sink.framesDone();
-    for (PatchJob& job : jobsOf(finalized, end_index)) match_node.try_put(std::move(job));
+    for (PatchJob& job : jobsOf(finalized, end_index)) describe_node.try_put(std::move(job));
     graph.wait_for_all();
   });
   sink.flush();

@@ -1,9 +1,8 @@
 // Layers for a bitmap that matched nothing, kept when they show it as faithfully as a reuse.
-// Its base is a periodic pattern (new, or a stored one aligned through the two lattices;
-// planned in the match stage), or a stored texture the cascade placed but could not accept
-// because some regions differ (a blackboard on one wall, posters on the other; planned in the
-// commit stage). Regions the base does not explain become overlays, matched against the
-// database like any bitmap.
+// Its base is a periodic pattern (new, or a stored one aligned through the two lattices), or a
+// stored texture the cascade placed but could not accept because some regions differ (a
+// blackboard on one wall, posters on the other). Regions the base does not explain become
+// overlays, matched against the database like any bitmap.
 #include <algorithm>
 
 #include <spdlog/spdlog.h>
@@ -45,11 +44,6 @@ std::vector<cv::Rect> overlayBoxes(const std::vector<cv::Rect>& blobs, const cv:
     }
   }
   return boxes;
-}
-
-double msSince(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
-      .count();
 }
 
 }  // namespace
@@ -115,23 +109,6 @@ match::Fidelity layeredFidelity(const match::TextureDescription& bitmap, const L
   return match::measureFidelity(bitmap.rgb, bitmap.mask, shown);
 }
 
-void findPattern(const LayerPlanner& planner, MatchedPatch& matched) {
-  const match::TextureDescription& bitmap = *matched.description;
-  try {
-    pattern::PatternAnalysis analysis =
-        pattern::analysePattern(bitmap.rgb, bitmap.mask, planner.config().extractor);
-    matched.pattern_ms += analysis.ms;
-    if (!analysis.pattern) return;
-    const auto start = std::chrono::steady_clock::now();
-    matched.layers = planner.planPattern(bitmap, std::move(*analysis.pattern));
-    matched.pattern_ms += msSince(start);
-  } catch (const std::exception& e) {  // the bitmap is then stored as it is
-    spdlog::warn("patch {} version {}: no layers: {}", matched.bitmap->id, matched.bitmap->version,
-                 e.what());
-    matched.layers.reset();
-  }
-}
-
 std::vector<OverlayMatch> LayerPlanner::matchOverlays(const match::TextureDescription& bitmap,
                                                       const std::vector<cv::Rect>& boxes) const {
   std::vector<OverlayMatch> overlays;
@@ -163,7 +140,6 @@ std::optional<LayerPlan> LayerPlanner::planPattern(const match::TextureDescripti
     for (const cv::Rect& box : boxes) base_mask(box).setTo(0);
     plan.base = match::describeTexture(bitmap.rgb, base_mask, cascade_.config());
   }
-  const auto lock = catalog_.readLock();
   // The explained rest may be a pattern the database has (the other brick wall's).
   std::vector<PatternCandidate> candidates;
   const match::TextureDescription& rest = plan.base ? *plan.base : bitmap;

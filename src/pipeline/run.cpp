@@ -146,12 +146,12 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
   const std::int64_t run_id = store->beginRun(source.name());
   const match::MatchCascade cascade(config.match);
   StoreCatalog catalog(*store, config.match);
-  const MatchStage match_stage(texture_stage, cascade, catalog, config.pattern);
+  const DescribeStage describe_stage(texture_stage, config.match, config.pattern);
   CommitStage commit_stage(*store, catalog, cascade, config.pattern, run_id);
 
   const auto start = std::chrono::steady_clock::now();
-  runGraph(source_stage, tracking_stage, integration_stage, plane_stage, texture_stage, match_stage,
-           commit_stage, sink,
+  runGraph(source_stage, tracking_stage, integration_stage, plane_stage, texture_stage,
+           describe_stage, commit_stage, sink,
            {threads, source.isLive() ? config.pipeline.live_frames_in_flight
                                      : config.pipeline.max_frames_in_flight});
   store->finishRun(run_id);

@@ -61,7 +61,6 @@ StoreCatalog::StoreCatalog(const db::TextureStore& store, const match::MatchConf
       index_.add(entry.id, match::computeCcv(record->rgb, record->mask, config.ccv).values);
     }
     ++size_;
-    newest_id_ = std::max(newest_id_, entry.id);
   }
 }
 
@@ -71,61 +70,53 @@ std::vector<match::CcvNeighbour> StoreCatalog::nearest(const std::vector<float>&
 }
 
 std::shared_ptr<const match::StoredTexture> StoreCatalog::load(std::int64_t id) const {
-  {
-    std::lock_guard lock(cache_mutex_);
-    if (const auto it = cache_.find(id); it != cache_.end()) return it->second;
-  }
+  if (const auto it = cache_.find(id); it != cache_.end()) return it->second;
   const std::optional<db::TextureRecord> record = store_.texture(id);
   if (!record) return nullptr;
-  std::shared_ptr<const match::StoredTexture> stored = storedTextureOf(*record, config_);
-  std::lock_guard lock(cache_mutex_);
-  return cache_.emplace(id, std::move(stored)).first->second;
+  return cache_.emplace(id, storedTextureOf(*record, config_)).first->second;
 }
 
 void StoreCatalog::add(std::shared_ptr<const match::StoredTexture> texture) {
-  std::unique_lock lock(mutex_);
   // Undescribed (match.enabled false): kept for export, never a candidate.
-  if (texture->description.ccv.values.empty()) {
-    std::lock_guard cache_lock(cache_mutex_);
-    cache_[texture->id] = std::move(texture);
-    return;
+  if (!texture->description.ccv.values.empty()) {
+    index_.add(texture->id, texture->description.ccv.values);
+    ++size_;
   }
-  index_.add(texture->id, texture->description.ccv.values);
-  ++size_;
-  newest_id_ = std::max(newest_id_, texture->id);
-  std::lock_guard cache_lock(cache_mutex_);
   cache_[texture->id] = std::move(texture);
 }
 
-MatchedPatch MatchStage::process(const PatchJob& job) const {
-  MatchedPatch matched;
-  matched.sequence = job.sequence;
-  matched.batch = job.batch;
-  matched.batch_size = job.batch_size;
-  matched.frame_index = job.frame_index;
-  matched.finalized_at = job.finalized_at;
-  matched.bitmap = textures_.build(job.patch);
-  if (!matched.bitmap) return matched;
-  if (!cascade_.config().enabled) {  // stored as it is: no description, no candidates
-    matched.description =
-        match::TextureDescription{matched.bitmap->image, validTexels(*matched.bitmap), {}, {}};
-    return matched;
+DescribedPatch DescribeStage::process(const PatchJob& job) const {
+  DescribedPatch described;
+  described.sequence = job.sequence;
+  described.batch = job.batch;
+  described.batch_size = job.batch_size;
+  described.frame_index = job.frame_index;
+  described.finalized_at = job.finalized_at;
+  described.bitmap = textures_.build(job.patch);
+  if (!described.bitmap) return described;
+  const texture::PatchBitmap& bitmap = *described.bitmap;
+  if (!match_.enabled) {  // stored as it is: no description, no candidates
+    described.description = match::TextureDescription{bitmap.image, validTexels(bitmap), {}, {}};
+    return described;
   }
   try {
     const SteadyTime start = std::chrono::steady_clock::now();
-    matched.description = match::describeTexture(matched.bitmap->image,
-                                                 validTexels(*matched.bitmap), cascade_.config());
-    matched.describe_ms = msSince(start);
-    const auto lock = catalog_.readLock();
-    matched.snapshot_id = catalog_.newestId();
-    matched.decision = cascade_.match(*matched.description, catalog_);
+    described.description = match::describeTexture(bitmap.image, validTexels(bitmap), match_);
+    described.describe_ms = msSince(start);
   } catch (const std::exception& e) {  // one patch's failure costs its matching, not the run
-    spdlog::warn("patch {} version {}: not matched: {}", job.patch.id, job.patch.version, e.what());
-    matched.description.reset();
-    return matched;
+    spdlog::warn("patch {} version {}: not matched: {}", bitmap.id, bitmap.version, e.what());
+    return described;
   }
-  if (!matched.decision.match && planner_.config().enabled) findPattern(planner_, matched);
-  return matched;
+  if (!patterns_.enabled) return described;
+  try {
+    pattern::PatternAnalysis analysis = pattern::analysePattern(
+        described.description->rgb, described.description->mask, patterns_.extractor);
+    described.pattern_ms = analysis.ms;
+    described.pattern = std::move(analysis.pattern);
+  } catch (const std::exception& e) {  // then matched and stored without layers
+    spdlog::warn("patch {} version {}: no pattern: {}", bitmap.id, bitmap.version, e.what());
+  }
+  return described;
 }
 
 CommitStage::CommitStage(db::TextureStore& store, StoreCatalog& catalog,
@@ -137,68 +128,23 @@ CommitStage::CommitStage(db::TextureStore& store, StoreCatalog& catalog,
       planner_(cascade, catalog, patterns),
       run_id_(run_id) {}
 
-std::vector<match::CandidateVerdict> CommitStage::allVerdicts(const MatchedPatch& matched) const {
-  const match::TextureDescription& query = *matched.description;
-  std::vector<match::CandidateVerdict> verdicts = matched.decision.verdicts;
-  for (const auto& texture : committed_) {
-    if (texture->id <= matched.snapshot_id) continue;
-    const double d = match::ccvDistance(query.ccv.values, texture->description.ccv.values);
-    if (d <= cascade_.config().ccv_max_distance) {
-      verdicts.push_back(cascade_.tryCandidate(query, *texture, d));
-    }
+std::optional<LayerPlan> CommitStage::planLayers(const DescribedPatch& described,
+                                                 const match::MatchDecision& decision,
+                                                 CommitRecord& record) const {
+  const SteadyTime start = std::chrono::steady_clock::now();
+  std::optional<LayerPlan> plan;
+  try {
+    if (described.pattern) plan = planner_.planPattern(*described.description, *described.pattern);
+    // A bitmap that nothing shows whole may be a stored texture with some regions changed (the
+    // same plaster, another poster on it).
+    if (!plan) plan = planner_.planPartialReuse(*described.description, decision.verdicts);
+  } catch (const std::exception& e) {  // then stored whole
+    const texture::PatchBitmap& bitmap = *described.bitmap;
+    spdlog::warn("patch {} version {}: no layers: {}", bitmap.id, bitmap.version, e.what());
+    plan.reset();
   }
-  std::sort(verdicts.begin(), verdicts.end(), [](const auto& a, const auto& b) {
-    return a.ccv_distance != b.ccv_distance ? a.ccv_distance < b.ccv_distance : a.id < b.id;
-  });
-  if (verdicts.size() > cascade_.config().max_candidates) {
-    verdicts.resize(cascade_.config().max_candidates);
-  }
-  return verdicts;
-}
-
-std::optional<match::CandidateVerdict> CommitStage::recheck(const MatchedPatch& matched,
-                                                            std::size_t& newer_passing) const {
-  // The max_candidates textures nearest in CCV among everything stored so far, in the order
-  // the matcher takes them, the first accepted winning: the matcher's verdicts stand for the
-  // textures it saw (every one before the one it accepted was refused), the cascade runs on
-  // those committed since its snapshot. A newer texture that pushes the matcher's choice out of
-  // the nearest max_candidates takes it out of the running, as it would have in order.
-  struct Entry {
-    double distance;
-    std::int64_t id;
-    const match::CandidateVerdict* seen;  // the matcher's verdict, or null for a newer texture
-  };
-  const match::TextureDescription& query = *matched.description;
-  const double bound = cascade_.config().ccv_max_distance;
-  std::vector<Entry> entries;
-  for (const match::CandidateVerdict& verdict : matched.decision.verdicts) {
-    entries.push_back({verdict.ccv_distance, verdict.id, &verdict});
-  }
-  newer_passing = 0;
-  for (const auto& texture : committed_) {
-    if (texture->id <= matched.snapshot_id) continue;
-    const double d = match::ccvDistance(query.ccv.values, texture->description.ccv.values);
-    if (d > bound) continue;
-    ++newer_passing;
-    entries.push_back({d, texture->id, nullptr});
-  }
-  std::sort(entries.begin(), entries.end(), [](const Entry& a, const Entry& b) {
-    return a.distance != b.distance ? a.distance < b.distance : a.id < b.id;
-  });
-  if (entries.size() > cascade_.config().max_candidates) {
-    entries.resize(cascade_.config().max_candidates);
-  }
-  for (const Entry& entry : entries) {
-    if (entry.seen != nullptr) {
-      if (entry.seen->accepted) return *entry.seen;
-      continue;
-    }
-    const auto stored = std::find_if(committed_.begin(), committed_.end(),
-                                     [&](const auto& t) { return t->id == entry.id; });
-    match::CandidateVerdict verdict = cascade_.tryCandidate(query, **stored, entry.distance);
-    if (verdict.accepted) return verdict;
-  }
-  return std::nullopt;
+  record.pattern_ms += msSince(start);
+  return plan;
 }
 
 std::int64_t CommitStage::addTexture(
@@ -238,28 +184,10 @@ db::TextureRecord singleRecord(const match::TextureDescription& description, dou
 
 }  // namespace
 
-bool CommitStage::planCommit(const MatchedPatch& matched, db::Commit& commit,
+void CommitStage::planCommit(const texture::PatchBitmap& bitmap, const LayerPlan& plan,
+                             db::Commit& commit,
                              std::vector<std::shared_ptr<match::StoredTexture>>& fresh,
                              CommitRecord& record) const {
-  const texture::PatchBitmap& bitmap = *matched.bitmap;
-  LayerPlan plan = *matched.layers;
-  if (plan.found && catalog_.newestId() > matched.snapshot_id) {
-    // Textures were committed after the matcher's snapshot: the pattern plan is made again over
-    // all of them, so that the outcome is the one a matcher that saw every earlier commit
-    // would have reached, whatever the threads' timing (patching the old plan with the newer
-    // textures left one or two threads storing different textures under load).
-    const auto start = std::chrono::steady_clock::now();
-    std::optional<LayerPlan> again;
-    try {
-      again = planner_.planPattern(*matched.description, *plan.found);
-    } catch (const std::exception& e) {  // then stored whole
-      spdlog::warn("patch {} version {}: no layers: {}", bitmap.id, bitmap.version, e.what());
-    }
-    record.pattern_ms += msSince(start);
-    if (!again) return false;
-    plan = std::move(*again);
-  }
-
   db::TextureInstance base;
   base.run_id = run_id_;
   base.patch_id = bitmap.id;
@@ -310,59 +238,42 @@ bool CommitStage::planCommit(const MatchedPatch& matched, db::Commit& commit,
     }
     commit.instances.push_back(layer);
   }
-  return true;
 }
 
-CommitRecord CommitStage::process(MatchedPatch matched) {
+CommitRecord CommitStage::process(DescribedPatch described) {
   ScopedStageTime time(timer_);
   CommitRecord record;
-  if (!matched.bitmap) return record;
-  const texture::PatchBitmap& bitmap = *matched.bitmap;
+  if (!described.bitmap) return record;
+  const texture::PatchBitmap& bitmap = *described.bitmap;
   record.patch_id = bitmap.id;
   record.version = bitmap.version;
   record.bitmap_ms = bitmap.build_ms;
-  record.describe_ms = matched.describe_ms;
-  record.match_ms = matched.decision.ms;
-  record.pattern_ms = matched.pattern_ms;
-  match_timer_.add(matched.decision.ms + matched.pattern_ms);
-  if (!matched.description) return record;
+  record.describe_ms = described.describe_ms;
+  record.pattern_ms = described.pattern_ms;
+  if (!described.description) return record;
 
-  db::Commit commit;
-  std::size_t newer_passing = 0;
-  const std::optional<match::CandidateVerdict> reuse =
-      cascade_.config().enabled ? recheck(matched, newer_passing) : std::nullopt;
+  // Against every texture the patches before this one stored: the outcome does not depend on
+  // the threads' timing.
+  std::optional<match::CandidateVerdict> reuse;
+  std::optional<LayerPlan> layers;
   if (cascade_.config().enabled) {
-    // As if every earlier patch had been committed before this one was matched, whatever the
-    // matcher's snapshot held: the prefilter considered every texture stored so far and let
-    // through at most max_candidates of those within its bound.
-    record.ccv_considered = catalog_.size();
-    const std::size_t passing =
-        std::min(cascade_.config().max_candidates, matched.decision.passed_ccv + newer_passing);
-    record.ccv_removed = record.ccv_considered - std::min(passing, record.ccv_considered);
+    match::MatchDecision decision;
+    try {
+      decision = cascade_.match(*described.description, catalog_);
+    } catch (const std::exception& e) {  // one patch's failure costs its matching, not the run
+      spdlog::warn("patch {} version {}: not matched: {}", bitmap.id, bitmap.version, e.what());
+    }
+    record.match_ms = decision.ms;
+    record.ccv_considered = decision.considered;
+    record.ccv_removed = decision.considered - std::min(decision.passed_ccv, decision.considered);
     ccv_considered_ += record.ccv_considered;
     ccv_removed_ += record.ccv_removed;
+    reuse = decision.match;
+    if (!reuse && planner_.config().enabled) layers = planLayers(described, decision, record);
   }
-  if (!reuse && matched.decision.match && !matched.layers && cascade_.config().enabled &&
-      planner_.config().enabled) {
-    // The matcher's choice fell out of the nearest textures once the newer ones counted, so it
-    // never looked for a pattern: looked for here, as a matcher that saw them would have.
-    findPattern(planner_, matched);
-    matched.snapshot_id = catalog_.newestId();
-    record.pattern_ms = matched.pattern_ms;
-  }
-  // A bitmap that nothing shows whole may be a stored texture with some regions changed (the
-  // same plaster, another poster on it): planned here, where every earlier texture is known,
-  // so that the outcome does not depend on what the matcher's snapshot held.
-  if (!reuse && !matched.layers && cascade_.config().enabled && planner_.config().enabled) {
-    const auto start = std::chrono::steady_clock::now();
-    try {
-      matched.layers = planner_.planPartialReuse(*matched.description, allVerdicts(matched));
-    } catch (const std::exception& e) {  // then stored whole
-      spdlog::warn("patch {} version {}: no layers: {}", bitmap.id, bitmap.version, e.what());
-    }
-    matched.snapshot_id = catalog_.newestId();  // the plan saw every committed texture
-    record.pattern_ms += msSince(start);
-  }
+  match_timer_.add(record.match_ms + record.pattern_ms);
+
+  db::Commit commit;
   std::vector<std::shared_ptr<match::StoredTexture>> fresh;  // parallel to commit.textures
   if (reuse) {
     db::TextureInstance instance;
@@ -375,18 +286,19 @@ CommitRecord CommitStage::process(MatchedPatch matched) {
     instance.reused = true;
     record.method = reuse->method;
     commit.instances.push_back(instance);
-  } else if (matched.layers && planCommit(matched, commit, fresh, record)) {
-    // stored in layers
+  } else if (layers) {
+    planCommit(bitmap, *layers, commit, fresh, record);
   } else {
     db::TextureInstance instance;
     instance.run_id = run_id_;
     instance.patch_id = bitmap.id;
     instance.version = bitmap.version;
-    db::TextureRecord texture = singleRecord(*matched.description, bitmap.grid.texel_m, bitmap.id);
+    db::TextureRecord texture =
+        singleRecord(*described.description, bitmap.grid.texel_m, bitmap.id);
     texture.rgb = bitmap.image;
-    auto described = std::make_shared<match::StoredTexture>();
-    described->description = *matched.description;
-    instance.texture_id = addTexture(std::move(texture), std::move(described), commit, fresh);
+    auto stored = std::make_shared<match::StoredTexture>();
+    stored->description = *described.description;
+    instance.texture_id = addTexture(std::move(texture), std::move(stored), commit, fresh);
     instance.reused = instance.texture_id > 0;
     if (instance.reused) instance.psnr_db = 99.0;
     record.method = instance.reused ? "same pixels" : "stored";
@@ -403,7 +315,6 @@ CommitRecord CommitStage::process(MatchedPatch matched) {
   }
   for (std::size_t i = 0; i < fresh.size(); ++i) {
     fresh[i]->id = ids.at(i);
-    committed_.push_back(fresh[i]);
     catalog_.add(fresh[i]);
     ++textures_stored_;
     patterns_stored_ += fresh[i]->pattern ? 1 : 0;
@@ -421,7 +332,7 @@ CommitRecord CommitStage::process(MatchedPatch matched) {
   instances_[bitmap.id] = commit.instances;
   record.instance = commit.instances.front();
   record.overlays.assign(commit.instances.begin() + 1, commit.instances.end());
-  record.commit_latency_ms = msSince(matched.finalized_at);
+  record.commit_latency_ms = msSince(described.finalized_at);
   commit_latencies_ms_.push_back(record.commit_latency_ms);
   return record;
 }

@@ -45,6 +45,24 @@ Instances instancesOf(const fs::path& db_path) {
   return instances;
 }
 
+std::string readText(const fs::path& path) {
+  std::ifstream in(path);
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+// A TUM trajectory's lines (after its comments) in ascending time.
+bool timestampsAscend(const fs::path& path) {
+  std::ifstream in(path);
+  double previous = -1.0;
+  for (std::string line; std::getline(in, line);) {
+    if (line.empty() || line[0] == '#') continue;
+    const double t = std::stod(line);
+    if (t <= previous) return false;
+    previous = t;
+  }
+  return previous >= 0.0;
+}
+
 #define TESSERA_REQUIRE_DEFAULT_RECORDING()                               \
   if (!fs::is_regular_file(kRecording)) {                                 \
     GTEST_SKIP() << "recordings/office.oni not rendered (configure with " \
@@ -66,6 +84,9 @@ TEST(TextureReuse, TheSecondTableReusesTheFirstAndOneOrTwoThreadsStoreTheSame) {
   EXPECT_EQ(one.ccv_considered, two.ccv_considered);
   EXPECT_EQ(one.ccv_removed, two.ccv_removed);
   EXPECT_EQ(instancesOf(root / "one/textures.db"), instancesOf(root / "two/textures.db"));
+  // Every stage saw the frames in the source's order, with one thread or two.
+  EXPECT_EQ(readText(root / "one/trajectory.txt"), readText(root / "two/trajectory.txt"));
+  EXPECT_TRUE(timestampsAscend(root / "two/trajectory.txt"));
   EXPECT_GE(two.reuses, 1u);
   EXPECT_LT(two.pixels_after, two.pixels_before);
 
@@ -119,8 +140,7 @@ TEST(TextureReuse, TheSecondTableReusesTheFirstAndOneOrTwoThreadsStoreTheSame) {
   ASSERT_TRUE(texture_of_plane.count("wall_west") && texture_of_plane.count("wall_east"));
   EXPECT_EQ(texture_of_plane["wall_west"], texture_of_plane["wall_east"]);
   EXPECT_GE(two.overlays, 4u);
-  std::ifstream obj(root / "two/patches.obj");
-  const std::string text((std::istreambuf_iterator<char>(obj)), std::istreambuf_iterator<char>());
+  const std::string text = readText(root / "two/patches.obj");
   EXPECT_NE(text.find(fmt::format("o patch_{}_v", *north_patch)), std::string::npos);
   EXPECT_NE(text.find("_overlay_1"), std::string::npos);
 }

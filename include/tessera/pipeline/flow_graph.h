@@ -1,8 +1,9 @@
 #pragma once
 // The one place that knows the topology: source -> limiter -> tracking -> integration ->
 // planes -> stats sink, with the patches the plane stage finalizes going on to texturing and
-// matching (many patches at once) -> a sequencer (finalization order) -> the serial commit to
-// the texture database, as a tbb::flow::graph inside a task_arena of the requested concurrency.
+// description (many patches at once) -> a sequencer (finalization order) -> the serial match
+// and commit to the texture database, as a tbb::flow::graph inside a task_arena of the requested
+// concurrency.
 #include "tessera/pipeline/stages.h"
 #include "tessera/pipeline/texture_db_stages.h"
 
@@ -16,7 +17,7 @@ struct GraphOptions {
 // Runs the stages over the whole stream, then flushes them in order (end of stream).
 // Blocks until done.
 void runGraph(SourceStage& source, TrackingStage& tracking, IntegrationStage& integration,
-              PlaneStage& planes, TextureStage& textures, const MatchStage& matcher,
+              PlaneStage& planes, TextureStage& textures, const DescribeStage& describer,
               CommitStage& committer, StatsSink& sink, const GraphOptions& options);
 
 // Hardware threads, at least 1.

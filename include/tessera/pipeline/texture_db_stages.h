@@ -1,17 +1,15 @@
 #pragma once
-// The stages after texturing: each new bitmap is matched against the texture database (many
-// at once, each holding a read snapshot of the CCV index), then committed one at a time in
-// finalization order. The commit stage re-checks the bitmap against the textures committed
-// since its matcher's snapshot, so that the same texture is never stored twice and the result
-// does not depend on how many threads ran.
+// The stages after texturing: each finalized patch's bitmap is built, described and searched
+// for a periodic pattern (many patches at once: none of it reads the database), then matched
+// against the texture database and committed one patch at a time, in finalization order. Each
+// patch is matched against every texture the patches before it stored, so the same texture is
+// never stored twice and the result does not depend on how many threads ran or how fast.
 #include <chrono>
 #include <cstddef>
 #include <cstdint>
 #include <map>
 #include <memory>
-#include <mutex>
 #include <optional>
-#include <shared_mutex>
 #include <vector>
 
 #include "tessera/db/texture_store.h"
@@ -61,21 +59,18 @@ struct LayerPlan {
   match::Fidelity fidelity;  // of all layers together, over the whole bitmap
 };
 
-// A patch's bitmap, its description and the matcher's decision.
-struct MatchedPatch {
+// A patch's bitmap, its description and the periodic pattern in it: all that can be worked
+// out without the database.
+struct DescribedPatch {
   std::size_t sequence = 0;
   std::size_t batch = 0;
   std::size_t batch_size = 0;
   std::uint64_t frame_index = 0;
   std::optional<texture::PatchBitmap> bitmap;  // nothing when it could not be built
   std::optional<match::TextureDescription> description;
-  match::MatchDecision decision;
-  // A bitmap that matched nothing: its layers, when together they show it as faithfully as a
-  // reuse must (then stored instead of the bitmap).
-  std::optional<LayerPlan> layers;
-  double pattern_ms = 0.0;
-  double describe_ms = 0.0;      // CCV and features of the new bitmap
-  std::int64_t snapshot_id = 0;  // the newest texture the matcher could see
+  std::optional<pattern::Pattern> pattern;  // in bitmap texels; looked for when enabled
+  double describe_ms = 0.0;                 // CCV and features of the new bitmap
+  double pattern_ms = 0.0;                  // the autocorrelation analysis
   SteadyTime finalized_at;
 
   struct Batch {
@@ -89,30 +84,24 @@ struct MatchedPatch {
 cv::Mat validTexels(const texture::PatchBitmap& bitmap);
 
 // The database's textures as the cascade sees them: their CCVs in an index, the textures
-// themselves loaded on demand (and kept). Readers hold readLock() for the whole of a match;
-// the commit stage adds under the write lock.
+// themselves loaded on demand (and kept). Read and written by the commit stage only.
 class StoreCatalog : public match::TextureCatalog {
  public:
   StoreCatalog(const db::TextureStore& store, const match::MatchConfig& config);
 
-  std::shared_lock<std::shared_mutex> readLock() const { return std::shared_lock(mutex_); }
-  std::int64_t newestId() const { return newest_id_; }  // under readLock()
   std::size_t size() const override { return size_; }
   std::vector<match::CcvNeighbour> nearest(const std::vector<float>& ccv, double max_distance,
                                            std::size_t k) const override;
   std::shared_ptr<const match::StoredTexture> load(std::int64_t id) const override;
 
-  // After a commit: takes the write lock.
+  // After a commit.
   void add(std::shared_ptr<const match::StoredTexture> texture);
 
  private:
   const db::TextureStore& store_;
   match::MatchConfig config_;
-  mutable std::shared_mutex mutex_;
   match::CcvIndex index_;
   std::size_t size_ = 0;
-  std::int64_t newest_id_ = 0;
-  mutable std::mutex cache_mutex_;
   mutable std::map<std::int64_t, std::shared_ptr<const match::StoredTexture>> cache_;
 };
 
@@ -121,8 +110,7 @@ class StoreCatalog : public match::TextureCatalog {
 std::shared_ptr<const match::StoredTexture> storedTextureOf(const db::TextureRecord& record,
                                                             const match::MatchConfig& config);
 
-// Plans a bitmap's layers (layer_plan.cpp). Thread-safe; the catalog is read as it is (the
-// match stage holds its read lock, the commit stage is its only writer).
+// Plans a bitmap's layers against the catalog as it is (layer_plan.cpp).
 class LayerPlanner {
  public:
   LayerPlanner(const match::MatchCascade& cascade, const StoreCatalog& catalog,
@@ -150,28 +138,19 @@ class LayerPlanner {
   pattern::PatternStageConfig patterns_;
 };
 
-// A periodic pattern in the matched bitmap, and its layer plan into matched.layers (none when
-// the bitmap is not periodic or the analysis fails). Adds its time to matched.pattern_ms.
-void findPattern(const LayerPlanner& planner, MatchedPatch& matched);  // layer_plan.cpp
-
-// Builds each patch's bitmap, describes it and matches it; a bitmap that matches nothing is
-// analysed for a periodic pattern (thread-safe: many at once). Partial reuses are planned at
-// commit, where every earlier texture is known.
-class MatchStage {
+// Builds each patch's bitmap, describes it (CCV, features) and looks for a periodic pattern in
+// it. Thread-safe: many patches at once.
+class DescribeStage {
  public:
-  MatchStage(const TextureStage& textures, const match::MatchCascade& cascade,
-             const StoreCatalog& catalog, const pattern::PatternStageConfig& patterns)
-      : textures_(textures),
-        cascade_(cascade),
-        catalog_(catalog),
-        planner_(cascade, catalog, patterns) {}
-  MatchedPatch process(const PatchJob& job) const;
+  DescribeStage(const TextureStage& textures, const match::MatchConfig& match,
+                const pattern::PatternStageConfig& patterns)
+      : textures_(textures), match_(match), patterns_(patterns) {}
+  DescribedPatch process(const PatchJob& job) const;
 
  private:
   const TextureStage& textures_;
-  const match::MatchCascade& cascade_;
-  const StoreCatalog& catalog_;
-  LayerPlanner planner_;
+  match::MatchConfig match_;
+  pattern::PatternStageConfig patterns_;
 };
 
 // A stored pattern the cascade's prefilter let through, with its CCV distance.
@@ -209,13 +188,15 @@ struct CommitRecord {
   double commit_latency_ms = 0.0;
 };
 
-// Serial, in finalization order: re-check, store, remember the map's instances.
+// Serial, in finalization order: match against every texture stored so far (a bitmap that
+// matches nothing is planned in layers: its periodic pattern, or a stored texture with some
+// regions changed), store, and remember the map's instances.
 class CommitStage {
  public:
   CommitStage(db::TextureStore& store, StoreCatalog& catalog, const match::MatchCascade& cascade,
               const pattern::PatternStageConfig& patterns, std::int64_t run_id);
 
-  CommitRecord process(MatchedPatch matched);
+  CommitRecord process(DescribedPatch described);
 
   // The newest instances of each patch id (its layers, 0 first), and the textures they use
   // (pixels per texture).
@@ -231,19 +212,14 @@ class CommitStage {
   const StageTimer& timer() const { return timer_; }
 
  private:
-  // The match as if every earlier patch had been committed before this one was matched: the
-  // matcher's verdicts merged with the cascade's on textures committed since its snapshot;
-  // `newer_passing` gets how many of those are within the prefilter's bound.
-  std::optional<match::CandidateVerdict> recheck(const MatchedPatch& matched,
-                                                 std::size_t& newer_passing) const;
-  // The verdicts on the max_candidates textures nearest in CCV among all stored so far: the
-  // matcher's, and the cascade's on textures committed since its snapshot.
-  std::vector<match::CandidateVerdict> allVerdicts(const MatchedPatch& matched) const;
+  // A bitmap that matched nothing: its layers, when together they show it as faithfully as a
+  // reuse must (then stored instead of the bitmap). Adds the planning time to `record`.
+  std::optional<LayerPlan> planLayers(const DescribedPatch& described,
+                                      const match::MatchDecision& decision,
+                                      CommitRecord& record) const;
   // A layer plan's textures and instances (layer 0 the base, then the overlays) into
-  // `commit`; new textures' descriptions into `fresh` (parallel to commit.textures). False,
-  // with nothing added, when textures committed since the matcher's snapshot changed the plan
-  // and it no longer shows the bitmap faithfully.
-  bool planCommit(const MatchedPatch& matched, db::Commit& commit,
+  // `commit`; new textures' descriptions into `fresh` (parallel to commit.textures).
+  void planCommit(const texture::PatchBitmap& bitmap, const LayerPlan& plan, db::Commit& commit,
                   std::vector<std::shared_ptr<match::StoredTexture>>& fresh,
                   CommitRecord& record) const;
   // A new texture for `commit`, or the id of one with the same pixels already stored
@@ -257,7 +233,6 @@ class CommitStage {
   const match::MatchCascade& cascade_;
   LayerPlanner planner_;
   std::int64_t run_id_;
-  std::vector<std::shared_ptr<const match::StoredTexture>> committed_;  // this run, ascending id
   std::map<int, std::vector<db::TextureInstance>> instances_;
   std::map<std::int64_t, std::size_t> texture_pixels_;
   std::size_t textures_stored_ = 0, patterns_stored_ = 0, commit_failures_ = 0;
