@@ -72,7 +72,8 @@ int runCommand(const RunArguments& args) {
     if (!args.db.empty()) run_options.db = args.db;
     if (args.source_args.max_frames > 0) run_options.max_frames = args.source_args.max_frames;
     run_options.on_progress = [&progress](const pipeline::Progress& p) { progress.update(p); };
-    if (source->isLive()) run_options.stop = &stopOnInterrupt();
+    // Live or replay: Ctrl-C stops the input and the map is finished and exported.
+    run_options.stop = &stopOnInterrupt();
 
     const pipeline::RunSummary summary = pipeline::runPipeline(*source, config, run_options);
     progress.finish();

@@ -15,7 +15,17 @@ std::atomic<bool> g_stop{false};
 static_assert(std::atomic<bool>::is_always_lock_free);
 
 extern "C" void requestStop(int /*signal*/) {
-  if (g_stop.exchange(true)) _exit(130);  // the second request: stop now
+  if (g_stop.exchange(true)) {
+    // The second request: stop now. SQLite's journal keeps the database as it was after the
+    // last committed patch.
+    static const char kAbort[] = "\ntessera: aborted\n";
+    (void)!write(STDERR_FILENO, kAbort, sizeof kAbort - 1);
+    _exit(130);
+  }
+  // write(2) is async-signal-safe; the logger is not.
+  static const char kStopping[] =
+      "\ntessera: stopping: finishing and exporting the map (again to abort)\n";
+  (void)!write(STDERR_FILENO, kStopping, sizeof kStopping - 1);
 }
 
 }  // namespace

@@ -1,6 +1,7 @@
 #pragma once
-// Ctrl-C (SIGINT) and SIGTERM end a live run cleanly: the stream stops, the map is exported.
-// A second Ctrl-C ends the process at once.
+// Ctrl-C (SIGINT) and SIGTERM end a run (live or replay) cleanly: the input stops, the live
+// patches are finalized and textured, the graph drains and the map is exported. A second
+// signal ends the process at once; the database keeps every patch committed before it.
 #include <atomic>
 
 namespace tessera::cli {

@@ -173,6 +173,7 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
   summary.relocalisations = tracking_stage.relocalisations();
   summary.feature_poses = tracking_stage.featurePoses();
   summary.source_end_problem = source_stage.endProblem();
+  summary.stopped_on_request = source_stage.stoppedOnRequest();
   summary.live = source.isLive();
   summary.live_stats = source_stage.liveStatsAtEnd();
   summary.source_interruptions = sink.interruptions();
@@ -237,6 +238,7 @@ void writeReport(const RunSummary& summary, const std::filesystem::path& path) {
       // Replay never drops; a live device's frames that the busy pipeline never read do.
       {"frames_dropped", summary.live_stats.frames_dropped},
       {"frames_bad", summary.frames_bad},
+      {"stopped_on_request", summary.stopped_on_request},
       {"frames_integrated", summary.frames_integrated},
       {"frames_without_pose", summary.frames_without_pose},
       {"holdout_every", summary.holdout_every},

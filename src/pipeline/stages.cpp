@@ -42,6 +42,7 @@ std::optional<core::Frame> SourceStage::next() {
 std::optional<core::Frame> SourceStage::read() {
   while (!max_frames_ || frames_read_ < *max_frames_) {
     if (stop_ != nullptr && stop_->load()) {
+      stopped_on_request_ = true;
       spdlog::info("{}: stopped on request after {} frames", source_.name(), frames_read_);
       return std::nullopt;
     }

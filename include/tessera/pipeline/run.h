@@ -50,6 +50,7 @@ struct RunSummary {
   std::size_t relocalisations = 0;  // tracking found again against a recent keyframe
   std::size_t feature_poses = 0;    // frames posed from features first (large motion)
   std::string source_end_problem;   // non-empty when the source ended abnormally
+  bool stopped_on_request = false;  // Ctrl-C or SIGTERM ended the input early
   // Live sources only (docs/METRICS.md): what the device sent and what the pipeline missed.
   bool live = false;
   core::LiveStats live_stats;

@@ -33,7 +33,7 @@ struct CommitRecord;  // texture_db_stages.h
 // what they have while the source waits for its device.
 class SourceStage {
  public:
-  // `stop`, when given, ends the stream as soon as it is set (Ctrl-C on a live run).
+  // `stop`, when given, ends the stream as soon as it is set (Ctrl-C, SIGTERM).
   SourceStage(core::FrameSource& source, std::optional<std::size_t> max_frames,
               const std::atomic<bool>* stop = nullptr);
 
@@ -42,6 +42,7 @@ class SourceStage {
 
   std::size_t framesRead() const { return frames_read_; }
   std::size_t badFrames() const { return bad_frames_; }
+  bool stoppedOnRequest() const { return stopped_on_request_; }
   // Set when the source ended abnormally (truncated recording, lost device).
   const std::string& endProblem() const { return end_problem_; }
   // The live source's counts when its stream ended (a device keeps sending after that).
@@ -56,6 +57,7 @@ class SourceStage {
   const std::atomic<bool>* stop_;
   std::size_t frames_read_ = 0;
   std::size_t bad_frames_ = 0;
+  bool stopped_on_request_ = false;
   std::string end_problem_;
   core::LiveStats live_stats_at_end_;
   StageTimer timer_;

@@ -1,0 +1,47 @@
+#!/bin/sh
+# Ctrl-C during a replay: the run stops reading, finishes and exports the map, and exits 0.
+# A second Ctrl-C aborts at once (status 130) and leaves the database readable.
+# Usage: interrupt_replay.sh TESSERA RECORDING OUT_DIR
+set -u
+tessera=$1 recording=$2 out=$3
+rm -rf "$out" && mkdir -p "$out"
+
+# Waits until the run's stats.jsonl has $2 frame lines, or fails after 60 s.
+wait_for_frames() {
+  i=0
+  while :; do
+    n=$(grep -c '"type":"frame"' "$1/stats.jsonl" 2>/dev/null)
+    [ "${n:-0}" -ge "$2" ] && return 0
+    i=$((i + 1))
+    [ $i -gt 600 ] && { echo "FAIL: no $2 frames in $1/stats.jsonl"; return 1; }
+    sleep 0.1
+  done
+}
+
+"$tessera" run "$recording" --poses gt --out "$out/once" >"$out/once.log" 2>&1 &
+pid=$!
+wait_for_frames "$out/once" 60 || exit 1
+kill -INT $pid
+wait $pid
+status=$?
+cat "$out/once.log"
+[ $status -eq 0 ] || { echo "FAIL: one Ctrl-C: exit status $status"; exit 1; }
+for f in report.json mesh.ply patches.obj patches.json trajectory.txt textures.db; do
+  [ -s "$out/once/$f" ] || { echo "FAIL: one Ctrl-C: no $f"; exit 1; }
+done
+grep -q '"stopped_on_request": true' "$out/once/report.json" || { echo "FAIL: not reported"; exit 1; }
+frames=$(sed -n 's/^ *"frames": \([0-9]*\),$/\1/p' "$out/once/report.json")
+echo "frames before the stop: $frames"
+[ "$frames" -ge 60 ] && [ "$frames" -lt 320 ] || { echo "FAIL: $frames frames"; exit 1; }
+
+"$tessera" run "$recording" --poses gt --out "$out/twice" >"$out/twice.log" 2>&1 &
+pid=$!
+wait_for_frames "$out/twice" 60 || exit 1
+kill -INT $pid
+sleep 0.2
+kill -INT $pid
+wait $pid
+status=$?
+[ $status -eq 130 ] || { echo "FAIL: two Ctrl-C: exit status $status"; exit 1; }
+"$tessera" db stats "$out/twice/textures.db" || { echo "FAIL: database unreadable"; exit 1; }
+echo "PASS"
