@@ -40,6 +40,9 @@ CLI::App* addRunCommand(CLI::App& app, RunArguments& args) {
                   "that `tessera eval --frames` scores views the map was not built from (0: none)")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
+  run->add_flag("--residual", args.residual,
+                "Also put the non-planar rest of the TSDF surface (what no patch covers), "
+                "vertex-coloured, into map.obj and map.glb as the object 'residual'");
   run->add_option("--db", args.db,
                   "Texture database to match against and grow (SQLite file, created if missing); "
                   "give the same file to several runs of one place to reuse its textures. "
@@ -69,6 +72,7 @@ int runCommand(const RunArguments& args) {
     run_options.poses =
         args.poses == "gt" ? pipeline::PoseSource::kGroundTruth : pipeline::PoseSource::kTrack;
     run_options.holdout_every = args.holdout_every;
+    run_options.residual = args.residual;
     if (!args.db.empty()) run_options.db = args.db;
     if (args.source_args.max_frames > 0) run_options.max_frames = args.source_args.max_frames;
     run_options.on_progress = [&progress](const pipeline::Progress& p) { progress.update(p); };

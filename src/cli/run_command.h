@@ -16,6 +16,7 @@ struct RunArguments {
   int threads = 0;
   std::string poses = "track";
   int holdout_every = 0;
+  bool residual = false;
   std::string db;
   SourceArguments source_args;
 };

@@ -15,6 +15,7 @@
 
 #include "tessera/core/error.h"
 #include "tessera/db/texture_store.h"
+#include "tessera/map_export/map_files.h"
 #include "tessera/pipeline/flow_graph.h"
 #include "tessera/pipeline/texture_db_stages.h"
 #include "tessera/planes/patch_export.h"
@@ -223,6 +224,12 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
     summary.bitmap_ms_per_m2 = texture_stage.timer().totalMs() / texture_stage.areaBuiltM2();
   }
   planes::writePatchesObj(patches, options.out_dir / "patches.obj", textures);
+  // The map users open: patches triangulated with their holes, one material per texture.
+  const map_export::MapModel map_model =
+      map_export::buildMapModel(patches, textures, options.residual ? &mesh : nullptr);
+  map_export::writeMapObj(map_model, options.out_dir / "map.obj");
+  map_export::writeMapGlb(map_model, options.out_dir, options.out_dir / "map.glb");
+  summary.map_triangles = map_model.triangleCount();
   planes::writePatchesJson(patches, options.out_dir / "patches.json", textures);
   summary.peak_rss_mb = peakRssMb();
   writeReport(summary, options.out_dir / "report.json");
@@ -255,6 +262,7 @@ void writeReport(const RunSummary& summary, const std::filesystem::path& path) {
       {"tsdf_bytes", summary.tsdf_bytes},
       {"tsdf_blocks_released", summary.tsdf_blocks_released},
       {"mesh_vertices", summary.mesh_vertices},
+      {"map_triangles", summary.map_triangles},
       {"patches_finalized", summary.patches_finalized},
       {"patch_finalizations", summary.patch_finalizations},
       {"patches_retired", summary.patches_retired},

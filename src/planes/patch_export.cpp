@@ -44,10 +44,9 @@ const TextureBinding* textureOf(const Patch& patch, const TextureBindings& textu
   return it != textures.end() && it->second.version == patch.version ? &it->second : nullptr;
 }
 
-// OBJ texture coordinates of plane point (u, v): the texel grid scaled to [0, 1], with the
-// image's first row at the top (OBJ's t axis points up); clamped, since the cell quads may
-// reach half a cell beyond the grid.
-Eigen::Vector2d textureCoordinates(const TextureBinding& texture, double u, double v) {
+}  // namespace
+
+Eigen::Vector2d textureCoordinates(const TextureBinding& texture, double u, double v, bool clamp) {
   const Eigen::Vector2d d = Eigen::Vector2d(u, v) - texture.origin_uv;
   if (const auto& shown = texture.map_texture) {
     // Pixel-centre coordinates on the patch's grid, through the instance, back to corners.
@@ -60,50 +59,56 @@ Eigen::Vector2d textureCoordinates(const TextureBinding& texture, double u, doub
     }
     const Eigen::Vector2d q = frame + Eigen::Vector2d(0.5, 0.5);
     const double s = q.x() / shown->width, t = 1.0 - q.y() / shown->height;
-    if (shown->tiled) return {s, t};
+    if (shown->tiled || !clamp) return {s, t};
     return {std::clamp(s, 0.0, 1.0), std::clamp(t, 0.0, 1.0)};
   }
   const double s = d.dot(texture.x_axis) / texture.texel_m / texture.width;
   const double t = 1.0 - d.dot(texture.y_axis) / texture.texel_m / texture.height;
+  if (!clamp) return {s, t};
   return {std::clamp(s, 0.0, 1.0), std::clamp(t, 0.0, 1.0)};
 }
 
-// An overlay as its own object: the quad its texture's rectangle covers on the patch, lifted
-// kOverlayLift towards the side the camera saw (-n) so that it is drawn over the pattern.
-// Returns the vertex count after it.
-constexpr double kOverlayLift_m = 0.001;
-
-std::size_t writeOverlay(std::ofstream& out, const Patch& patch, const Patch::Frame& frame,
-                         const TextureBinding& texture, const MapTexture& overlay,
-                         std::size_t layer, std::size_t vertices) {
+OverlayQuad overlayQuad(const TextureBinding& texture, const MapTexture& overlay) {
   const core::Similarity2 texture_to_patch = overlay.transform.inverse();
   const double w = overlay.width, h = overlay.height;
   // Texture pixel corners, and their OBJ texture coordinates (t up).
   const std::array<Eigen::Vector2d, 4> corners{
       Eigen::Vector2d(-0.5, -0.5), {w - 0.5, -0.5}, {w - 0.5, h - 0.5}, {-0.5, h - 0.5}};
-  const std::array<Eigen::Vector2d, 4> st{Eigen::Vector2d(0, 1), {1, 1}, {1, 0}, {0, 0}};
-  std::array<Eigen::Vector2d, 4> uv;
+  OverlayQuad quad;
+  quad.st = {Eigen::Vector2d(0, 1), {1, 1}, {1, 0}, {0, 0}};
   for (std::size_t i = 0; i < 4; ++i) {
     const Eigen::Vector2d texel = texture_to_patch.apply(corners[i]) + Eigen::Vector2d(0.5, 0.5);
-    uv[i] = texture.origin_uv +
-            texture.texel_m * (texel.x() * texture.x_axis + texel.y() * texture.y_axis);
+    quad.uv[i] = texture.origin_uv +
+                 texture.texel_m * (texel.x() * texture.x_axis + texel.y() * texture.y_axis);
   }
+  // Clockwise in (u, v), as the patch's faces: the face's normal is -n.
+  const Eigen::Vector2d a = quad.uv[1] - quad.uv[0], b = quad.uv[3] - quad.uv[0];
+  if (a.x() * b.y() - a.y() * b.x() > 0.0) {
+    std::swap(quad.uv[1], quad.uv[3]);
+    std::swap(quad.st[1], quad.st[3]);
+  }
+  return quad;
+}
+
+namespace {
+
+// An overlay as its own object: the quad its texture's rectangle covers on the patch, lifted
+// kOverlayLift_m towards the side the camera saw (-n) so that it is drawn over the pattern.
+// Returns the vertex count after it.
+std::size_t writeOverlay(std::ofstream& out, const Patch& patch, const Patch::Frame& frame,
+                         const TextureBinding& texture, const MapTexture& overlay,
+                         std::size_t layer, std::size_t vertices) {
+  const OverlayQuad quad = overlayQuad(texture, overlay);
   out << fmt::format("o patch_{}_v{}_overlay_{}\nusemtl texture_{}\n", patch.id, patch.version,
                      layer, overlay.texture_id);
   for (std::size_t i = 0; i < 4; ++i) {
-    const Eigen::Vector3d X = toWorld(frame, uv[i].x(), uv[i].y()) - kOverlayLift_m * patch.normal;
-    out << fmt::format("v {:.4f} {:.4f} {:.4f}\nvt {:.5f} {:.5f}\n", X.x(), X.y(), X.z(), st[i].x(),
-                       st[i].y());
+    const Eigen::Vector3d X =
+        toWorld(frame, quad.uv[i].x(), quad.uv[i].y()) - kOverlayLift_m * patch.normal;
+    out << fmt::format("v {:.4f} {:.4f} {:.4f}\nvt {:.5f} {:.5f}\n", X.x(), X.y(), X.z(),
+                       quad.st[i].x(), quad.st[i].y());
   }
-  // Clockwise in (u, v), as the patch's faces: the face's normal is -n.
-  const Eigen::Vector2d a = uv[1] - uv[0], b = uv[3] - uv[0];
-  const bool clockwise = a.x() * b.y() - a.y() * b.x() < 0.0;
   const std::size_t f = vertices + 1;
-  if (clockwise) {
-    out << fmt::format("f {0}/{0} {1}/{1} {2}/{2} {3}/{3}\n", f, f + 1, f + 2, f + 3);
-  } else {
-    out << fmt::format("f {0}/{0} {1}/{1} {2}/{2} {3}/{3}\n", f, f + 3, f + 2, f + 1);
-  }
+  out << fmt::format("f {0}/{0} {1}/{1} {2}/{2} {3}/{3}\n", f, f + 1, f + 2, f + 3);
   return vertices + 4;
 }
 

@@ -19,6 +19,7 @@ struct RunOptions {
   PoseSource poses = PoseSource::kTrack;
   std::optional<std::size_t> max_frames;
   int holdout_every = 0;  // every N-th frame is posed only, for eval's held-out views (0: none)
+  bool residual = false;  // map.obj / map.glb also get the non-planar rest of the TSDF surface
   // The texture database the run grows (or reuses from earlier runs); OUT/textures.db when
   // not given. A postgresql:// URL is refused until that backend exists.
   std::optional<std::string> db;
@@ -63,6 +64,7 @@ struct RunSummary {
   std::size_t tsdf_bytes = 0;
   std::size_t tsdf_blocks_released = 0;  // far behind the camera (tsdf.release_distance_m)
   std::size_t mesh_vertices = 0;
+  std::size_t map_triangles = 0;        // map.obj / map.glb
   std::size_t patches_finalized = 0;    // in the map at the end (OUT/patches.obj)
   std::size_t patch_finalizations = 0;  // every finalization, later versions included
   std::size_t patches_retired = 0;      // finalized, then merged into another patch

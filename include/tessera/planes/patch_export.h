@@ -1,6 +1,7 @@
 #pragma once
 // The finalized patches as files a user (or `tessera eval`) can open: an OBJ of untextured
 // polygons, and a JSON with each patch's plane, frame and outline.
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
@@ -47,6 +48,21 @@ struct TextureBinding {
   std::vector<MapTexture> overlays;
 };
 using TextureBindings = std::map<int, TextureBinding>;  // by patch id
+
+// OBJ texture coordinates (s right, t up) of plane point (u, v) in what `texture` shows (its
+// map texture, else its own bitmap): the image spans [0, 1], a lattice tile one cell. Clamped
+// to [0, 1], unless the image repeats or `clamp` is false (then the sampler clamps).
+Eigen::Vector2d textureCoordinates(const TextureBinding& texture, double u, double v,
+                                   bool clamp = true);
+
+// The quad an overlay's image covers on its patch: (u, v) corners, clockwise (the face's normal
+// is -n, towards the side the camera saw), and their OBJ texture coordinates.
+struct OverlayQuad {
+  std::array<Eigen::Vector2d, 4> uv, st;
+};
+OverlayQuad overlayQuad(const TextureBinding& texture, const MapTexture& overlay);
+// Overlays are drawn this far in front of their patch (towards -n), over its base texture.
+constexpr double kOverlayLift_m = 0.001;
 
 // One OBJ object per finalized patch ("patch_<id>_v<version>"): faces cover its closed
 // occupancy grid (one quad per run of cells in a row, so holes stay open) and line elements
