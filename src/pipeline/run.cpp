@@ -79,6 +79,8 @@ void bindMapTextures(const CommitStage& commits, const StoreCatalog& catalog,
     if (stored.pattern) shown.lattice = stored.lattice;
     shown.reused = instance.reused;
     shown.psnr_db = instance.psnr_db;
+    if (instance.reused)
+      (stored.pattern ? summary.patterns_matched : summary.textures_matched) += 1;
     if (used.insert(instance.texture_id).second) {
       texture::writeRgbaPng(out_dir / shown.image, rgb, stored.storedMask());
       summary.pixels_after += rgb.total();
@@ -299,6 +301,8 @@ void writeReport(const RunSummary& summary, const std::filesystem::path& path) {
   report["db"] = summary.db;
   report["textures_stored"] = summary.textures_stored;
   report["patterns_stored"] = summary.patterns_stored;
+  report["textures_matched"] = summary.textures_matched;
+  report["patterns_matched"] = summary.patterns_matched;
   report["overlays"] = summary.overlays;
   report["textured_patches"] = summary.textured_patches;
   report["reuses"] = summary.reuses;

@@ -89,6 +89,10 @@ TEST(TextureReuse, TheSecondTableReusesTheFirstAndOneOrTwoThreadsStoreTheSame) {
   EXPECT_TRUE(timestampsAscend(root / "two/trajectory.txt"));
   EXPECT_GE(two.reuses, 1u);
   EXPECT_LT(two.pixels_after, two.pixels_before);
+  // The paper's table: the north brick wall matches the south wall's pattern; the second
+  // table and the second plaster wall match stored (non-pattern) textures.
+  EXPECT_GE(two.patterns_matched, 1u);
+  EXPECT_GE(two.textures_matched, 2u);
 
   const nlohmann::json figures =
       eval::evaluateRun(root / "two", test::sourceDir() / "recordings/office.gt.json");

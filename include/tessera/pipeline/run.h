@@ -63,6 +63,9 @@ struct RunSummary {
   double peak_rss_mb = 0.0;
   std::size_t tsdf_bytes = 0;
   std::size_t tsdf_blocks_released = 0;  // far behind the camera (tsdf.release_distance_m)
+  // The paper's summary (docs/METRICS.md): layers of the map that reuse a stored texture, by
+  // kind (a pattern tile, or any other texture).
+  std::size_t textures_matched = 0, patterns_matched = 0;
   std::size_t mesh_vertices = 0;
   std::size_t map_triangles = 0;        // map.obj / map.glb
   std::size_t patches_finalized = 0;    // in the map at the end (OUT/patches.obj)
