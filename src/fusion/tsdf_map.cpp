@@ -122,12 +122,23 @@ void TsdfMap::integrate(const core::Frame& frame, const core::Isometry& T_W_C) {
   volume_->tsdf.Integrate(rgbd, intrinsic, T_C_W);
 }
 
+namespace {
+
+// Appends `mesh` to `into`.
+void append(const o3d::geometry::TriangleMesh& mesh, SurfaceMesh& into) {
+  const auto offset = static_cast<int>(into.vertices.size());
+  into.vertices.insert(into.vertices.end(), mesh.vertices_.begin(), mesh.vertices_.end());
+  into.colors.insert(into.colors.end(), mesh.vertex_colors_.begin(), mesh.vertex_colors_.end());
+  for (const Eigen::Vector3i& t : mesh.triangles_) {
+    into.triangles.push_back(t + Eigen::Vector3i::Constant(offset));
+  }
+}
+
+}  // namespace
+
 SurfaceMesh TsdfMap::extractMesh() const {
-  const auto mesh = volume_->tsdf.ExtractTriangleMesh();
-  SurfaceMesh out;
-  out.vertices = mesh->vertices_;
-  out.colors = mesh->vertex_colors_;
-  out.triangles = mesh->triangles_;
+  SurfaceMesh out = released_surface_;
+  append(*volume_->tsdf.ExtractTriangleMesh(), out);
   return out;
 }
 
@@ -135,27 +146,39 @@ std::size_t TsdfMap::releaseBlocksBehind(const core::Isometry& T_W_C, double dis
   auto& units = volume_->tsdf.volume_units_;
   const double block_m = config_.voxel_size_m * config_.block_resolution;
   const core::Isometry T_C_W = T_W_C.inverse();
-  std::size_t released = 0;
+  // The released blocks move into a volume of their own, whose surface is kept as a mesh (a
+  // few percent of their voxels' bytes). Marching cubes needs the next block's voxels for the
+  // cubes on a block's far faces, so a one-voxel seam stays open where released blocks meet
+  // blocks released later or still live.
+  o3d::pipelines::integration::ScalableTSDFVolume released(
+      config_.voxel_size_m, config_.truncation_m,
+      o3d::pipelines::integration::TSDFVolumeColorType::RGB8, config_.block_resolution);
   for (auto it = units.begin(); it != units.end();) {
     // Open3D keys a block by its integer index; it spans [index, index + 1) * block edge.
     const Eigen::Vector3d centre_W =
         (it->first.cast<double>() + Eigen::Vector3d::Constant(0.5)) * block_m;
     const Eigen::Vector3d centre_C = T_C_W * centre_W;
     if (centre_C.z() < 0.0 && centre_C.norm() > distance_m) {
+      released.volume_units_.emplace(it->first, std::move(it->second));
       it = units.erase(it);
-      ++released;
     } else {
       ++it;
     }
   }
-  return released;
+  if (!released.volume_units_.empty()) append(*released.ExtractTriangleMesh(), released_surface_);
+  return released.volume_units_.size();
 }
 
 std::size_t TsdfMap::blockCount() const { return volume_->tsdf.volume_units_.size(); }
 
 std::size_t TsdfMap::memoryBytes() const {
   const auto r = static_cast<std::size_t>(config_.block_resolution);
-  return blockCount() * r * r * r * sizeof(o3d::geometry::TSDFVoxel);
+  return blockCount() * r * r * r * sizeof(o3d::geometry::TSDFVoxel) + releasedSurfaceBytes();
+}
+
+std::size_t TsdfMap::releasedSurfaceBytes() const {
+  return released_surface_.vertices.size() * 2 * sizeof(Eigen::Vector3d) +
+         released_surface_.triangles.size() * sizeof(Eigen::Vector3i);
 }
 
 void writePly(const SurfaceMesh& mesh, const std::filesystem::path& path) {

@@ -27,9 +27,9 @@ struct TsdfConfig {
   // from the full-resolution frames by later stages, never from voxels.
   int integration_scale = 2;
   // Blocks behind the camera and farther than this from it are released after each frame
-  // (0: keep all), so memory stays bounded on long runs. Later stages finalize the planes
-  // there first.
-  double release_distance_m = 0.0;
+  // (0: keep all), so memory stays bounded on long runs; their surface is kept as a mesh. At
+  // 3 m the planes there have long been finalized (patches finalize once out of view).
+  double release_distance_m = 3.0;
   // Only every n-th posed frame is integrated, plus any frame taken more than 5 cm or 3 degrees
   // from the last one integrated. At 30 frames/s neighbouring frames add little to the
   // geometry; every frame is still tracked and searched for planes (patch growth and texture
@@ -66,14 +66,15 @@ class TsdfMap {
   SurfaceMesh extractMesh() const;
 
   // Frees the blocks far behind the camera at T_W_C: centre farther than distance_m from it and
-  // behind its image plane (so nothing the camera looks at is freed and re-allocated). Returns
-  // how many were freed.
+  // behind its image plane (so nothing the camera looks at is freed and re-allocated). Their
+  // surface is kept as a mesh, which extractMesh() includes. Returns how many were freed.
   std::size_t releaseBlocksBehind(const core::Isometry& T_W_C, double distance_m);
 
   const TsdfConfig& config() const { return config_; }
 
-  // Bytes held by allocated voxel blocks.
+  // Bytes held by allocated voxel blocks and the surface of released ones.
   std::size_t memoryBytes() const;
+  std::size_t releasedSurfaceBytes() const;
   std::size_t blockCount() const;
 
   // Caps the OpenMP threads Open3D uses inside integrate() on the calling thread.
@@ -83,7 +84,8 @@ class TsdfMap {
   struct Volume;
   TsdfConfig config_;
   std::unique_ptr<Volume> volume_;
-  int thread_cap_ = 0;  // 0: leave OpenMP's default
+  SurfaceMesh released_surface_;  // of the blocks released so far
+  int thread_cap_ = 0;            // 0: leave OpenMP's default
 };
 
 }  // namespace tessera::fusion
