@@ -138,6 +138,9 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
   planes::PlaneAlignmentConfig alignment = config.pose_correction;
   alignment.enabled = alignment.enabled && options.poses == PoseSource::kTrack;
   PlaneStage plane_stage(config.planes, config.patches, alignment);
+  // Finalized patches' colour samples wait here while out of memory; removed at the end.
+  const std::filesystem::path sample_dir = options.out_dir / "samples";
+  plane_stage.spillSamplesTo(sample_dir);
   TextureStage texture_stage(config.textures);
   StatsSink sink(options.out_dir, total, options.on_progress,
                  [&texture_stage] { return texture_stage.bitmapBytes(); });
@@ -212,6 +215,9 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
     summary.colour_samples += patch.samples.size();
     summary.colour_sample_bytes += patch.samples.bytes();
   }
+  summary.samples_released = patches.samplesReleased();
+  std::error_code ignored;
+  std::filesystem::remove_all(sample_dir, ignored);
   planes::TextureBindings textures =
       texture::writeBitmaps(texture_stage.bitmaps(), patches, options.out_dir);
   summary.db = store->location();
@@ -270,6 +276,7 @@ void writeReport(const RunSummary& summary, const std::filesystem::path& path) {
       {"patches_retired", summary.patches_retired},
       {"colour_samples", summary.colour_samples},
       {"colour_sample_bytes", summary.colour_sample_bytes},
+      {"samples_released", summary.samples_released},
       {"bitmaps", summary.bitmaps},
       {"bitmap_texels_observed", summary.bitmap_texels_observed},
       {"bitmap_texels_inpainted", summary.bitmap_texels_inpainted},

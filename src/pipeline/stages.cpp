@@ -281,6 +281,7 @@ FusedFrame PlaneStage::process(FusedFrame fused) {
   }
   count(fused.patch_events);
   fused.finalized_patches = snapshotsOf(fused.patch_events);
+  map_.releaseIdleSamples(static_cast<long>(fused.frame.index));
   fused.planes_ms = timer_.lastMs();
   fused.patches_live = map_.liveCount();
   fused.patches_finalized = map_.finalizedCount();

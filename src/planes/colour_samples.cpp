@@ -2,6 +2,11 @@
 
 #include <algorithm>
 #include <cmath>
+#include <fstream>
+
+#include <fmt/format.h>
+
+#include "tessera/core/error.h"
 
 namespace tessera::planes {
 
@@ -132,6 +137,65 @@ std::vector<ColourSample> ColourSamples::all() const {
       }
     }
   }
+  return samples;
+}
+
+namespace {
+
+constexpr char kSamplesMagic[8] = {'t', 's', 's', 'm', 'p', 'l', 's', '1'};
+
+}  // namespace
+
+void ColourSamples::save(const std::filesystem::path& path) const {
+  std::ofstream out(path, std::ios::binary);
+  // Tiles in key order, so that the file (and a reload) does not depend on hash order.
+  std::vector<std::int64_t> keys;
+  for (const auto& entry : tiles_) keys.push_back(entry.first);
+  std::sort(keys.begin(), keys.end());
+  const std::uint64_t count = keys.size(), size = size_;
+  out.write(kSamplesMagic, sizeof kSamplesMagic);
+  out.write(reinterpret_cast<const char*>(&cell_m_), sizeof cell_m_);
+  out.write(reinterpret_cast<const char*>(&inverse_cell_), sizeof inverse_cell_);
+  out.write(reinterpret_cast<const char*>(&size), sizeof size);
+  out.write(reinterpret_cast<const char*>(&count), sizeof count);
+  for (const std::int64_t key : keys) {
+    const std::vector<Cell>& tile = tiles_.at(key);
+    out.write(reinterpret_cast<const char*>(&key), sizeof key);
+    out.write(reinterpret_cast<const char*>(tile.data()),
+              static_cast<std::streamsize>(tile.size() * sizeof(Cell)));
+  }
+  out.close();
+  if (!out) {
+    throw core::Error(
+        fmt::format("{}: could not write colour samples (disk full?)", path.string()));
+  }
+}
+
+ColourSamples ColourSamples::load(const std::filesystem::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  char magic[sizeof kSamplesMagic] = {};
+  float cell_m = 0.0F, inverse_cell = 0.0F;
+  std::uint64_t size = 0, count = 0;
+  in.read(magic, sizeof magic);
+  in.read(reinterpret_cast<char*>(&cell_m), sizeof cell_m);
+  in.read(reinterpret_cast<char*>(&inverse_cell), sizeof inverse_cell);
+  in.read(reinterpret_cast<char*>(&size), sizeof size);
+  in.read(reinterpret_cast<char*>(&count), sizeof count);
+  if (!in || !std::equal(magic, magic + sizeof magic, kSamplesMagic) || !(cell_m > 0.0F)) {
+    throw core::Error(fmt::format("{}: not a colour sample file, or cut short", path.string()));
+  }
+  ColourSamples samples(cell_m);
+  samples.inverse_cell_ = inverse_cell;  // as saved, bit for bit
+  for (std::uint64_t i = 0; i < count; ++i) {
+    std::int64_t key = 0;
+    std::vector<Cell> tile(static_cast<std::size_t>(kTileCells * kTileCells));
+    in.read(reinterpret_cast<char*>(&key), sizeof key);
+    in.read(reinterpret_cast<char*>(tile.data()),
+            static_cast<std::streamsize>(tile.size() * sizeof(Cell)));
+    if (!in) throw core::Error(fmt::format("{}: colour samples cut short", path.string()));
+    samples.tiles_.emplace(key, std::move(tile));
+  }
+  samples.size_ = size;
   return samples;
 }
 

@@ -4,8 +4,13 @@
 #include <cmath>
 #include <limits>
 
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
 #include <Eigen/Geometry>
+
 #include <opencv2/core.hpp>
+
+#include "tessera/core/error.h"
 
 namespace tessera::planes {
 
@@ -149,6 +154,7 @@ std::vector<int> PatchMap::add(const std::vector<PlaneObservation>& observations
       continue;
     }
     // The region joins every patch it continues: they were parts of one plane.
+    for (const std::size_t m : matches) restoreSamples(patches_[m]);
     Patch& kept = patches_[matches.front()];
     for (std::size_t m = matches.size(); m-- > 1;) {
       absorb(kept, patches_[matches[m]]);
@@ -231,6 +237,55 @@ std::vector<PatchEvent> PatchMap::endFrame(long frame_index) {
   }
   seen_this_frame_.clear();
   return events;
+}
+
+void PatchMap::setSampleSpillDir(std::filesystem::path dir) {
+  std::error_code ec;
+  std::filesystem::create_directories(dir, ec);
+  if (ec) {
+    spdlog::warn("{}: cannot create it ({}); colour samples stay in memory", dir.string(),
+                 ec.message());
+    return;
+  }
+  spill_dir_ = std::move(dir);
+}
+
+std::size_t PatchMap::releaseIdleSamples(long frame_index) {
+  if (!spill_dir_ || config_.release_samples_after_frames <= 0 || spill_failed_) return 0;
+  std::size_t released = 0;
+  for (Patch& patch : patches_) {
+    if (!patch.finalized || patch.spilled_samples || patch.samples.size() == 0 ||
+        frame_index - patch.last_seen_frame < config_.release_samples_after_frames) {
+      continue;
+    }
+    const std::filesystem::path path = *spill_dir_ / fmt::format("patch_{}.samples", patch.id);
+    try {
+      patch.samples.save(path);
+    } catch (const core::Error& e) {
+      spdlog::warn("{}; colour samples stay in memory from now on", e.what());
+      spill_failed_ = true;
+      std::error_code ec;
+      std::filesystem::remove(path, ec);
+      break;
+    }
+    patch.samples = ColourSamples(config_.sample_cell_m);
+    patch.spilled_samples = path;
+    ++released;
+  }
+  samples_released_ += released;
+  return released;
+}
+
+void PatchMap::restoreSamples(Patch& patch) const {
+  if (!patch.spilled_samples) return;
+  try {
+    patch.samples = ColourSamples::load(*patch.spilled_samples);
+  } catch (const core::Error& e) {  // the patch goes on with the samples it gets from now
+    spdlog::error("patch {}: {}; its earlier colours are lost", patch.id, e.what());
+  }
+  std::error_code ec;
+  std::filesystem::remove(*patch.spilled_samples, ec);
+  patch.spilled_samples.reset();
 }
 
 std::vector<PatchEvent> PatchMap::finalizeAll() {

@@ -49,14 +49,14 @@ Outline traceOutline(const CellSet& cells, double cell_m) {
     min_j = std::min(min_j, j), max_j = std::max(max_j, j);
   }
   // Empty border cells on each side, so contours never touch the image edge.
-  cv::Mat grid = cv::Mat::zeros(max_j - min_j + 1 + 2 * kBorder, max_i - min_i + 1 + 2 * kBorder,
-                                CV_8UC1);
+  cv::Mat grid =
+      cv::Mat::zeros(max_j - min_j + 1 + 2 * kBorder, max_i - min_i + 1 + 2 * kBorder, CV_8UC1);
   for (const auto& [i, j] : cells) {
     grid.at<std::uint8_t>(j - min_j + kBorder, i - min_i + kBorder) = 255;
   }
   // Close one-cell gaps left where no point happened to fall (outside the image is empty).
-  cv::morphologyEx(grid, grid, cv::MORPH_CLOSE, cv::Mat::ones(3, 3, CV_8UC1), cv::Point(-1, -1),
-                   1, cv::BORDER_CONSTANT, cv::Scalar(0));
+  cv::morphologyEx(grid, grid, cv::MORPH_CLOSE, cv::Mat::ones(3, 3, CV_8UC1), cv::Point(-1, -1), 1,
+                   cv::BORDER_CONSTANT, cv::Scalar(0));
   outline.area_m2 = cv::countNonZero(grid) * cell_m * cell_m;
   outline.grid = grid;
   outline.first_cell = {min_i - kBorder, min_j - kBorder};

@@ -123,9 +123,9 @@ PlaneDetection PlaneDetector::detect(const core::Frame& frame) const {
   detection.scale = config_.working_scale;
   const OrganisedPoints organised = organisedPoints(frame, config_);
 
-  const cv::Ptr<cv::rgbd::RgbdPlane> finder = cv::rgbd::RgbdPlane::create(
-      cv::rgbd::RgbdPlane::RGBD_PLANE_METHOD_DEFAULT, config_.block_size, config_.min_pixels,
-      config_.threshold_px);
+  const cv::Ptr<cv::rgbd::RgbdPlane> finder =
+      cv::rgbd::RgbdPlane::create(cv::rgbd::RgbdPlane::RGBD_PLANE_METHOD_DEFAULT,
+                                  config_.block_size, config_.min_pixels, config_.threshold_px);
   cv::Mat grown;
   cv::Mat coefficients;
   try {

@@ -38,6 +38,7 @@ void readConfig(const core::ConfigSection& section, PatchMapConfig& config) {
   section.read("max_growth", config.max_growth);
   section.read("out_of_view_frames", config.out_of_view_frames);
   section.read("min_area_m2", config.min_area_m2);
+  section.read("release_samples_after_frames", config.release_samples_after_frames);
   section.read("sample_cell_m", config.sample_cell_m);
   section.read("colour_every_n_frames", config.colour_every_n_frames);
   section.read("colour_depth_tolerance_m", config.colour_depth_tolerance_m);
@@ -48,13 +49,16 @@ void readConfig(const core::ConfigSection& section, PatchMapConfig& config) {
     throw core::ConfigError(
         "patches: max_normal_angle_deg, max_offset_m and cell_m must be positive");
   }
+  if (config.release_samples_after_frames < 0) {
+    throw core::ConfigError("patches: release_samples_after_frames must be 0 (keep) or positive");
+  }
   if (config.stable_frames < 1 || config.out_of_view_frames < 1 || config.max_growth < 0.0) {
     throw core::ConfigError(
         "patches: stable_frames and out_of_view_frames must be at least 1, max_growth at least 0");
   }
-  if (config.min_area_m2 < 0.0 || config.sample_cell_m <= 0.0 ||
-      config.colour_every_n_frames < 1 || config.colour_depth_tolerance_m <= 0.0 ||
-      config.colour_depth_tolerance_per_m2 < 0.0 || config.colour_edge_margin_px < 0) {
+  if (config.min_area_m2 < 0.0 || config.sample_cell_m <= 0.0 || config.colour_every_n_frames < 1 ||
+      config.colour_depth_tolerance_m <= 0.0 || config.colour_depth_tolerance_per_m2 < 0.0 ||
+      config.colour_edge_margin_px < 0) {
     throw core::ConfigError(
         "patches: min_area_m2, colour_depth_tolerance_per_m2 and colour_edge_margin_px must be "
         "at least 0, sample_cell_m and colour_depth_tolerance_m positive, colour_every_n_frames "

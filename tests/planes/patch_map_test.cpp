@@ -1,4 +1,7 @@
+#include <algorithm>
+#include <filesystem>
 #include <random>
+#include <tuple>
 
 #include <gtest/gtest.h>
 
@@ -82,13 +85,13 @@ TEST(PatchMap, RegionsOfARenderedPlaneBecomeWorldPoints) {
 // A wall 2 m away with a 40 cm square box face 1.2 m in front of it, seen from T_W_C: the
 // nearest of the two along each ray, in millimetres.
 core::Frame wallBehindBox(const core::Isometry& T_W_C) {
-  core::Frame frame = test::renderPlane(test::kinectIntrinsics(), T_W_C,
-                                        Eigen::Vector3d(0, 0, -1), -2.0);
+  core::Frame frame =
+      test::renderPlane(test::kinectIntrinsics(), T_W_C, Eigen::Vector3d(0, 0, -1), -2.0);
   const core::Intrinsics& k = frame.intrinsics;
   for (int v = 0; v < k.height; ++v) {
     for (int u = 0; u < k.width; ++u) {
-      const Eigen::Vector3d ray = T_W_C.linear() * Eigen::Vector3d((u - k.cx) / k.fx,
-                                                                   (v - k.cy) / k.fy, 1.0);
+      const Eigen::Vector3d ray =
+          T_W_C.linear() * Eigen::Vector3d((u - k.cx) / k.fx, (v - k.cy) / k.fy, 1.0);
       const double t = (0.8 - T_W_C.translation().z()) / ray.z();
       const Eigen::Vector3d X = T_W_C.translation() + t * ray;
       if (t > 0.0 && std::abs(X.x()) <= 0.2 && std::abs(X.y()) <= 0.2) {
@@ -264,6 +267,78 @@ TEST(PatchColours, SamplesFromAFrameMatchTheColourOnThePlane) {
   }
   // Only samples within a few millimetres of a square's edge may disagree.
   EXPECT_GT(static_cast<double>(matching), 0.97 * static_cast<double>(samples.size()));
+}
+
+// Bounded memory: a finalized patch out of view for release_samples_after_frames frames moves
+// its samples to a file; seen again, it gets them back exactly, and the file is gone.
+TEST(PatchLifecycle, AFinalizedPatchOutOfViewReleasesItsSamplesAndGetsThemBackWhenSeen) {
+  const Eigen::Vector3d n = Eigen::Vector3d(0.1, -0.2, -1.0).normalized();
+  const core::Isometry T_W_C = core::Isometry::Identity();
+  const core::Frame frame =
+      test::renderPlane(test::kinectIntrinsics(), T_W_C, n, n.dot(Eigen::Vector3d(0, 0, 1.5)));
+  const PlaneDetection detection = PlaneDetector(PlaneDetectorConfig{}).detect(frame);
+  PatchMapConfig config = lifecycleConfig();
+  config.release_samples_after_frames = 20;
+  PatchMap map(config);
+  const auto spill = std::filesystem::temp_directory_path() / "tessera_tests" / "sample_spill";
+  std::filesystem::remove_all(spill);
+  map.setSampleSpillDir(spill);
+  const auto ids = map.add(observationsOf(frame, detection, T_W_C));
+  map.addColours(frame, detection, T_W_C, ids);
+  ASSERT_EQ(map.patches().size(), 1u);
+  const std::vector<ColourSample> before = map.patches().front().samples.all();
+  ASSERT_GT(before.size(), 100000u);
+  long f = 0;
+  for (; f < 15; ++f) EXPECT_EQ(map.releaseIdleSamples(f), 0u);  // not finalized yet
+  map.endFrame(0);
+  for (f = 1; f <= 15; ++f) map.endFrame(f);  // finalized out of view at frame 15
+  ASSERT_TRUE(map.patches().front().finalized);
+  EXPECT_EQ(map.releaseIdleSamples(19), 0u);  // unseen for 19 frames only
+  EXPECT_EQ(map.releaseIdleSamples(20), 1u);
+  const Patch& released = map.patches().front();
+  EXPECT_EQ(released.samples.size(), 0u);
+  EXPECT_EQ(released.samples.bytes(), 0u);
+  ASSERT_TRUE(released.spilled_samples);
+  EXPECT_TRUE(std::filesystem::is_regular_file(*released.spilled_samples));
+  EXPECT_EQ(map.releaseIdleSamples(40), 0u);  // released once
+
+  map.add(observationsOf(frame, detection, T_W_C));  // seen again
+  const Patch& back = map.patches().front();
+  EXPECT_FALSE(back.spilled_samples);
+  const std::vector<ColourSample> after = back.samples.all();
+  ASSERT_EQ(after.size(), before.size());
+  const auto key = [](const ColourSample& s) { return std::tuple(s.u, s.v, s.rgb, s.score); };
+  std::vector<std::tuple<float, float, std::array<std::uint8_t, 3>, float>> a, b;
+  for (const ColourSample& s : before) a.push_back(key(s));
+  for (const ColourSample& s : after) b.push_back(key(s));
+  std::sort(a.begin(), a.end());
+  std::sort(b.begin(), b.end());
+  EXPECT_EQ(a, b);
+  EXPECT_TRUE(std::filesystem::is_empty(spill));
+}
+
+// A spill folder that cannot take the file keeps the samples in memory.
+TEST(PatchLifecycle, SamplesStayInMemoryWhenTheirFileCannotBeWritten) {
+  const Eigen::Vector3d n(0, 0, -1);
+  const core::Isometry T_W_C = core::Isometry::Identity();
+  const core::Frame frame = test::renderPlane(test::kinectIntrinsics(), T_W_C, n, -1.5);
+  const PlaneDetection detection = PlaneDetector(PlaneDetectorConfig{}).detect(frame);
+  PatchMapConfig config = lifecycleConfig();
+  config.release_samples_after_frames = 5;
+  PatchMap map(config);
+  const auto spill = std::filesystem::temp_directory_path() / "tessera_tests" / "sample_spill_ro";
+  std::filesystem::remove_all(spill);
+  map.setSampleSpillDir(spill);
+  // A folder where the file should go: the file cannot be created.
+  const auto ids = map.add(observationsOf(frame, detection, T_W_C));
+  map.addColours(frame, detection, T_W_C, ids);
+  std::filesystem::create_directories(spill /
+                                      ("patch_" + std::to_string(ids.front()) + ".samples"));
+  for (long f = 0; f <= 15; ++f) map.endFrame(f);
+  ASSERT_TRUE(map.patches().front().finalized);
+  EXPECT_EQ(map.releaseIdleSamples(30), 0u);
+  EXPECT_GT(map.patches().front().samples.size(), 100000u);
+  EXPECT_FALSE(map.patches().front().spilled_samples);
 }
 
 }  // namespace

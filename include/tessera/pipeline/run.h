@@ -73,6 +73,7 @@ struct RunSummary {
   std::size_t patches_retired = 0;      // finalized, then merged into another patch
   std::size_t colour_samples = 0;       // held by all patches at the end
   std::size_t colour_sample_bytes = 0;
+  std::size_t samples_released = 0;  // patches whose samples left memory (and came back or not)
   // Bitmaps of the finalized patches (their current versions), as exported.
   std::size_t bitmaps = 0;
   std::size_t bitmap_texels_observed = 0;

@@ -177,6 +177,8 @@ class PlaneStage {
   std::vector<planes::PatchEvent> finish(std::vector<planes::PatchSnapshot>& finalized);
 
   const planes::PatchMap& map() const { return map_; }
+  // Where finalized patches' colour samples go when they leave memory (PatchMap).
+  void spillSamplesTo(std::filesystem::path dir) { map_.setSampleSpillDir(std::move(dir)); }
   std::size_t finalizations() const { return finalizations_; }  // versions included
   std::size_t retirements() const { return retirements_; }
   const StageTimer& timer() const { return timer_; }

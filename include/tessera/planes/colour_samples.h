@@ -8,6 +8,7 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <filesystem>
 #include <limits>
 #include <optional>
 #include <unordered_map>
@@ -47,6 +48,11 @@ class ColourSamples {
   std::size_t bytes() const;
   // One sample per cell holding colour: its blended colour at the weighted mean position.
   std::vector<ColourSample> all() const;
+
+  // The cells as a file, exactly (a finalized patch's samples leave memory so); throws
+  // core::Error naming the file when it cannot be written or read back.
+  void save(const std::filesystem::path& path) const;
+  static ColourSamples load(const std::filesystem::path& path);
 
  private:
   // 12 bytes a cell: at 3.5 mm cells a fully covered square metre holds 0.98 MB.

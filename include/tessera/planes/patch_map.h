@@ -7,6 +7,7 @@
 // higher version of the same id.
 #include <cstddef>
 #include <deque>
+#include <filesystem>
 #include <optional>
 #include <set>
 #include <utility>
@@ -34,6 +35,10 @@ struct PatchMapConfig {
   double max_growth = 0.02;
   int out_of_view_frames = 60;
   double min_area_m2 = 0.1;
+  // A finalized patch unseen for this many frames moves its colour samples out of memory into
+  // a file (PatchMap::setSampleSpillDir), and loads them back if it is seen again; 0 keeps
+  // them. Its texture was made from them at finalization: memory stays bounded on long runs.
+  int release_samples_after_frames = 90;
   // Colour samples: each sample_cell_m square of the plane blends the samples that fall in it.
   double sample_cell_m = 0.0035;
   // Colours are taken from every N-th frame (and from frames far from the last one sampled):
@@ -88,6 +93,10 @@ struct Patch {
   // Sum over every coloured pixel of the log gain its frame was compensated by, per channel:
   // the patch's texture is brought back to the mean exposure of its views.
   Eigen::Vector3d log_gain_sum = Eigen::Vector3d::Zero();
+
+  // Where the samples are while they are out of memory (PatchMapConfig::
+  // release_samples_after_frames); `samples` is then empty.
+  std::optional<std::filesystem::path> spilled_samples;
 
   // Finalization state.
   int version = 0;  // 0: never finalized; each finalization adds one
@@ -156,6 +165,14 @@ class PatchMap {
   // At the end of the stream: finalizes every patch not finalized, above the area bound.
   std::vector<PatchEvent> finalizeAll();
 
+  // The folder released samples go to (created if missing); without one nothing is released.
+  void setSampleSpillDir(std::filesystem::path dir);
+  // Moves the samples of finalized patches unseen for release_samples_after_frames frames to
+  // files; returns how many patches released theirs. A file that cannot be written (disk full)
+  // leaves the samples in memory, with a warning.
+  std::size_t releaseIdleSamples(long frame_index);
+  std::size_t samplesReleased() const { return samples_released_; }
+
   const Patch* find(int id) const;
   // A copy of patch `id` for texturing (its outline traced, its samples listed).
   PatchSnapshot snapshot(const Patch& patch) const;
@@ -178,6 +195,8 @@ class PatchMap {
                       const PointMoments& moments) const;
   static void refit(Patch& patch);
   void finalize(Patch& patch, std::vector<PatchEvent>& events) const;
+  // Loads a released patch's samples back (a region continues it).
+  void restoreSamples(Patch& patch) const;
 
   PatchMapConfig config_;
   std::vector<Patch> patches_;
@@ -185,6 +204,9 @@ class PatchMap {
   std::vector<PatchEvent> pending_;  // retirements from merges, reported by endFrame
   Eigen::Vector3f last_gain_ = Eigen::Vector3f::Ones();
   int next_id_ = 0;
+  std::optional<std::filesystem::path> spill_dir_;
+  std::size_t samples_released_ = 0;
+  bool spill_failed_ = false;  // warned once
 };
 
 }  // namespace tessera::planes

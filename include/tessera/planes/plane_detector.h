@@ -14,8 +14,8 @@
 namespace tessera::planes {
 
 struct PlaneDetectorConfig {
-  int working_scale = 2;      // detect on every N-th pixel (2: 320x240 from 640x480)
-  int block_size = 20;        // side of the seed blocks, pixels at working resolution
+  int working_scale = 2;  // detect on every N-th pixel (2: 320x240 from 640x480)
+  int block_size = 20;    // side of the seed blocks, pixels at working resolution
   // Disparity is measured in pixels of a Kinect-like stereo pair (focal length fx of the
   // frame, baseline below); the Kinect v1 quantises it in steps of 1/8 pixel.
   double baseline_m = 0.075;
