@@ -141,7 +141,7 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
   // Finalized patches' colour samples wait here while out of memory; removed at the end.
   const std::filesystem::path sample_dir = options.out_dir / "samples";
   plane_stage.spillSamplesTo(sample_dir);
-  TextureStage texture_stage(config.textures);
+  TextureStage texture_stage(config.textures, options.out_dir);
   StatsSink sink(options.out_dir, total, options.on_progress,
                  [&texture_stage] { return texture_stage.bitmapBytes(); });
   // Without --db the run starts its own database, replacing one an earlier run left in OUT.
@@ -218,8 +218,9 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
   summary.samples_released = patches.samplesReleased();
   std::error_code ignored;
   std::filesystem::remove_all(sample_dir, ignored);
+  texture_stage.flush();
   planes::TextureBindings textures =
-      texture::writeBitmaps(texture_stage.bitmaps(), patches, options.out_dir);
+      texture::currentBindings(texture_stage.written(), patches, options.out_dir);
   summary.db = store->location();
   bindMapTextures(commit_stage, catalog, options.out_dir, textures, summary);
   for (const auto& [id, binding] : textures) {

@@ -12,6 +12,7 @@
 #include "tessera/eval/trajectory.h"
 #include "tessera/eval/view_evaluation.h"
 #include "tessera/pipeline/texture_db_stages.h"
+#include "tessera/texture/bitmap_export.h"
 
 namespace tessera::pipeline {
 
@@ -320,16 +321,31 @@ void TextureStage::keep(std::optional<texture::PatchBitmap> built) {
   texture::PatchBitmap& bitmap = *built;
   timer_.add(bitmap.build_ms);
   area_built_m2_ += bitmap.area_m2();
-  const auto bytesOf = [](const texture::PatchBitmap& b) { return 3 * b.grid.texels(); };
-  auto it = bitmaps_.find(bitmap.id);
-  // Versions of one patch may be built out of order; the newest wins.
-  if (it == bitmaps_.end()) {
-    bitmap_bytes_ += bytesOf(bitmap);
-    bitmaps_.emplace(bitmap.id, std::move(bitmap));
-  } else if (it->second.version < bitmap.version) {
-    bitmap_bytes_ += bytesOf(bitmap);
-    bitmap_bytes_ -= bytesOf(it->second);
-    it->second = std::move(bitmap);
+  // Versions of one patch come in finalization order (the commit stage's): the newest wins.
+  const auto bytesOf = [](int width, int height) {
+    return 3 * static_cast<std::size_t>(width) * static_cast<std::size_t>(height);
+  };
+  if (const auto it = written_.find(bitmap.id); it != written_.end()) {
+    bitmap_bytes_ -= bytesOf(it->second.width, it->second.height);
+    written_.erase(it);
+  }
+  if (const auto it = unwritten_.find(bitmap.id); it != unwritten_.end()) {
+    bitmap_bytes_ -= bytesOf(it->second.grid.width, it->second.grid.height);
+    unwritten_.erase(it);
+  }
+  bitmap_bytes_ += bytesOf(bitmap.grid.width, bitmap.grid.height);
+  try {
+    written_.emplace(bitmap.id, texture::writeBitmapFiles(bitmap, out_dir_));
+  } catch (const core::Error& e) {  // kept, and tried again at the end
+    spdlog::error("patch {} version {}: {}; its bitmap stays in memory", bitmap.id, bitmap.version,
+                  e.what());
+    unwritten_.emplace(bitmap.id, std::move(bitmap));
+  }
+}
+
+void TextureStage::flush() {
+  for (auto it = unwritten_.begin(); it != unwritten_.end(); it = unwritten_.erase(it)) {
+    written_.emplace(it->first, texture::writeBitmapFiles(it->second, out_dir_));
   }
 }
 

@@ -47,26 +47,36 @@ planes::TextureBinding bindingOf(const PatchBitmap& bitmap, const std::string& i
   return binding;
 }
 
-planes::TextureBindings writeBitmaps(const std::map<int, PatchBitmap>& bitmaps,
-                                     const planes::PatchMap& map,
-                                     const std::filesystem::path& out_dir) {
+planes::TextureBinding writeBitmapFiles(const PatchBitmap& bitmap,
+                                        const std::filesystem::path& out_dir) {
   const std::filesystem::path folder = out_dir / "textures";
   std::error_code ec;
   std::filesystem::create_directories(folder, ec);
-  if (ec)
+  if (ec) {
     throw core::Error(fmt::format("{}: cannot be created: {}", folder.string(), ec.message()));
-  planes::TextureBindings bindings;
-  for (const auto& [id, bitmap] : bitmaps) {
-    const planes::Patch* patch = map.find(id);
-    if (patch == nullptr || !patch->finalized || patch->version != bitmap.version) continue;
-    const std::string image = fmt::format("textures/patch_{}.png", id);
-    const std::string state = fmt::format("textures/patch_{}_state.png", id);
-    writeRgbaPng(out_dir / image, bitmap.image,
-                 bitmap.state != static_cast<int>(TexelState::kEmpty));
-    writePng(out_dir / state, bitmap.state);
-    bindings.emplace(id, bindingOf(bitmap, image, state));
   }
-  return bindings;
+  const std::string image = fmt::format("textures/patch_{}.png", bitmap.id);
+  const std::string state = fmt::format("textures/patch_{}_state.png", bitmap.id);
+  writeRgbaPng(out_dir / image, bitmap.image, bitmap.state != static_cast<int>(TexelState::kEmpty));
+  writePng(out_dir / state, bitmap.state);
+  return bindingOf(bitmap, image, state);
+}
+
+planes::TextureBindings currentBindings(const planes::TextureBindings& written,
+                                        const planes::PatchMap& map,
+                                        const std::filesystem::path& out_dir) {
+  planes::TextureBindings current;
+  for (const auto& [id, binding] : written) {
+    const planes::Patch* patch = map.find(id);
+    if (patch != nullptr && patch->finalized && patch->version == binding.version) {
+      current.emplace(id, binding);
+      continue;
+    }
+    std::error_code ignored;
+    std::filesystem::remove(out_dir / binding.image, ignored);
+    std::filesystem::remove(out_dir / binding.state_image, ignored);
+  }
+  return current;
 }
 
 void readBitmapImages(const std::filesystem::path& image, const std::filesystem::path& state_image,

@@ -263,6 +263,35 @@ TEST(Pipeline, AbnormalEndKeepsTheWorkDone) {
             "recording truncated at frame 4");
 }
 
+// A bitmap whose files cannot be written (the textures folder is a file: as on a full disk)
+// stays in memory, and flush() writes it once it can; the newest version of a patch wins.
+TEST(TextureStageFiles, ABitmapThatCannotBeWrittenStaysUntilFlush) {
+  const std::filesystem::path out = test::freshTempDir();
+  std::ofstream(out / "textures") << "in the way";
+  TextureStage stage(texture::BitmapConfig{}, out);
+  texture::PatchBitmap bitmap;
+  bitmap.id = 4;
+  bitmap.version = 1;
+  bitmap.grid.width = 8;
+  bitmap.grid.height = 6;
+  bitmap.image = cv::Mat(6, 8, CV_8UC3, cv::Scalar(10, 20, 30));
+  bitmap.state = cv::Mat(6, 8, CV_8UC1, cv::Scalar(1));
+  stage.keep(bitmap);
+  EXPECT_TRUE(stage.written().empty());
+  EXPECT_THROW(stage.flush(), core::Error);
+  std::filesystem::remove(out / "textures");
+  bitmap.version = 2;
+  stage.keep(bitmap);  // the newer version, written at once
+  ASSERT_EQ(stage.written().size(), 1u);
+  EXPECT_EQ(stage.written().at(4).version, 2);
+  EXPECT_NO_THROW(stage.flush());
+  EXPECT_EQ(stage.written().at(4).version, 2);
+  const cv::Mat rgba = cv::imread((out / "textures/patch_4.png").string(), cv::IMREAD_UNCHANGED);
+  ASSERT_EQ(rgba.type(), CV_8UC4);
+  EXPECT_EQ(rgba.at<cv::Vec4b>(0, 0), cv::Vec4b(30, 20, 10, 255));
+  EXPECT_EQ(stage.bitmapBytes(), 3u * 8u * 6u);
+}
+
 TEST(Pipeline, MaxFramesStopsEarly) {
   ScriptedSource source(6, {});
   RunOptions options;

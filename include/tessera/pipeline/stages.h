@@ -19,6 +19,7 @@
 #include "tessera/fusion/tsdf_map.h"
 #include "tessera/pipeline/stage_timer.h"
 #include "tessera/planes/frame_sharpness.h"
+#include "tessera/planes/patch_export.h"
 #include "tessera/planes/patch_map.h"
 #include "tessera/planes/plane_alignment.h"
 #include "tessera/planes/plane_detector.h"
@@ -211,15 +212,23 @@ class PlaneStage {
 // the newest version of each patch's bitmap (keep(), called by one node at a time).
 class TextureStage {
  public:
-  explicit TextureStage(const texture::BitmapConfig& config) : config_(config) {}
+  // Bitmaps are written under out_dir/textures/ as they are kept.
+  TextureStage(const texture::BitmapConfig& config, std::filesystem::path out_dir)
+      : config_(config), out_dir_(std::move(out_dir)) {}
 
   // Nothing (with a warning naming the patch) when the bitmap cannot be built, so that one bad
   // patch costs its bitmap only, never the run.
   std::optional<texture::PatchBitmap> build(const planes::PatchSnapshot& patch) const;
+  // Writes the bitmap's files when it is the newest version of its patch, and lets its pixels
+  // go (the map's memory stays bounded); one whose files cannot be written (disk full) stays
+  // in memory until flush().
   void keep(std::optional<texture::PatchBitmap> bitmap);
+  // Writes the bitmaps still in memory; throws core::Error naming a file that cannot be
+  // written.
+  void flush();
 
-  // The newest bitmap of each patch id.
-  const std::map<int, texture::PatchBitmap>& bitmaps() const { return bitmaps_; }
+  // Where the newest bitmap of each patch id lies on its patch, and its files.
+  const planes::TextureBindings& written() const { return written_; }
   // Build time of each bitmap, and their total area (m^2 of observed texels).
   const StageTimer& timer() const { return timer_; }
   double areaBuiltM2() const { return area_built_m2_; }
@@ -228,7 +237,9 @@ class TextureStage {
 
  private:
   texture::BitmapConfig config_;
-  std::map<int, texture::PatchBitmap> bitmaps_;
+  std::filesystem::path out_dir_;
+  planes::TextureBindings written_;
+  std::map<int, texture::PatchBitmap> unwritten_;  // newest versions whose files failed
   std::atomic<std::size_t> bitmap_bytes_{0};
   StageTimer timer_;
   double area_built_m2_ = 0.0;

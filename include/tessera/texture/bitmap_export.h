@@ -9,12 +9,17 @@
 
 namespace tessera::texture {
 
-// Writes out_dir/textures/patch_<id>.png and patch_<id>_state.png for each bitmap whose patch
-// is finalized in `map` at the bitmap's version, and returns where each lies on its patch (for
-// patches.obj and patches.json). Throws core::Error naming a file that cannot be written.
-planes::TextureBindings writeBitmaps(const std::map<int, PatchBitmap>& bitmaps,
-                                     const planes::PatchMap& map,
-                                     const std::filesystem::path& out_dir);
+// Writes out_dir/textures/patch_<id>.png and patch_<id>_state.png (replacing an earlier
+// version's) and returns where the bitmap lies on its patch (for patches.obj and
+// patches.json). Throws core::Error naming a file that cannot be written.
+planes::TextureBinding writeBitmapFiles(const PatchBitmap& bitmap,
+                                        const std::filesystem::path& out_dir);
+
+// The bindings among `written` whose patch is finalized in `map` at their version; the files of
+// the others (patches merged away since) are removed.
+planes::TextureBindings currentBindings(const planes::TextureBindings& written,
+                                        const planes::PatchMap& map,
+                                        const std::filesystem::path& out_dir);
 
 // An RGB image (CV_8UC3) as an RGBA PNG whose alpha is `mask` (CV_8UC1). Throws core::Error
 // naming the file when it cannot be written.
