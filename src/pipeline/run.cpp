@@ -241,6 +241,7 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
   summary.map_triangles = map_model.triangleCount();
   planes::writePatchesJson(patches, options.out_dir / "patches.json", textures);
   summary.peak_rss_mb = peakRssMb();
+  summary.rss_growth_mb_per_1000_frames = sink.rssGrowthMbPer1000Frames();
   writeReport(summary, options.out_dir / "report.json");
   return summary;
 }
@@ -299,6 +300,7 @@ void writeReport(const RunSummary& summary, const std::filesystem::path& path) {
                             ? json(static_cast<double>(summary.live_stats.frames_dropped) /
                                    static_cast<double>(summary.live_stats.frames_delivered))
                             : json(nullptr);
+  report["rss_growth_mb_per_1000_frames"] = optional(summary.rss_growth_mb_per_1000_frames);
   report["latency_ms_p50"] = optional(summary.latency_ms_p50);
   report["latency_ms_p95"] = optional(summary.latency_ms_p95);
   report["device_losses"] = summary.live_stats.device_losses;

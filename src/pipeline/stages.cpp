@@ -1,6 +1,9 @@
 #include "tessera/pipeline/stages.h"
 
+#include <unistd.h>
+
 #include <chrono>
+#include <fstream>
 
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
@@ -349,6 +352,35 @@ void TextureStage::flush() {
   }
 }
 
+namespace {
+
+// The process's resident memory now (/proc/self/statm: pages), MB; 0 where it cannot be read.
+double residentMb() {
+  std::ifstream statm("/proc/self/statm");
+  std::size_t total_pages = 0, resident_pages = 0;
+  if (!(statm >> total_pages >> resident_pages)) return 0.0;
+  return static_cast<double>(resident_pages) * static_cast<double>(sysconf(_SC_PAGESIZE)) / 1e6;
+}
+
+}  // namespace
+
+std::optional<double> StatsSink::rssGrowthMbPer1000Frames() const {
+  const std::size_t n = rss_mb_.size();
+  if (n < 200) return std::nullopt;
+  // Least-squares slope of RSS against the frame count over the second half.
+  double sx = 0, sy = 0, sxx = 0, sxy = 0, m = 0;
+  for (std::size_t i = n / 2; i < n; ++i, ++m) {
+    const auto x = static_cast<double>(i);
+    sx += x;
+    sy += rss_mb_[i];
+    sxx += x * x;
+    sxy += x * rss_mb_[i];
+  }
+  const double denominator = m * sxx - sx * sx;
+  if (denominator <= 0.0) return std::nullopt;
+  return 1000.0 * (m * sxy - sx * sy) / denominator;
+}
+
 StatsSink::StatsSink(const std::filesystem::path& out_dir, std::optional<std::size_t> frames_total,
                      ProgressCallback on_progress, std::function<std::size_t()> bitmap_bytes)
     : stats_path_(out_dir / "stats.jsonl"),
@@ -390,6 +422,7 @@ void StatsSink::process(const FusedFrame& fused) {
   if (fused.frame.T_W_C_gt) ground_truth_[fused.frame.timestamp_ns] = *fused.frame.T_W_C_gt;
   const std::size_t bitmap_bytes = bitmap_bytes_ ? bitmap_bytes_() : 0;
   map_bytes_ = fused.tsdf_bytes + bitmap_bytes;
+  rss_mb_.push_back(residentMb());
   const double elapsed_s =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
 
@@ -405,6 +438,7 @@ void StatsSink::process(const FusedFrame& fused) {
                            {"tsdf_blocks_released", fused.tsdf_blocks_released},
                            {"bitmap_bytes", bitmap_bytes},
                            {"map_bytes", map_bytes_},
+                           {"rss_mb", rss_mb_.back()},
                            {"planes_ms", fused.planes_ms},
                            {"planes_detected", fused.planes_detected},
                            {"patches_live", fused.patches_live},

@@ -124,6 +124,7 @@ TEST(Pipeline, RunsEveryGoodFrameAndWritesTheOutputs) {
   EXPECT_EQ(summary.frames_integrated, 7u);
   EXPECT_EQ(progress_calls, 7u);
   EXPECT_GT(summary.tsdf_bytes, 0u);
+  EXPECT_FALSE(summary.rss_growth_mb_per_1000_frames);  // too few frames to say
   EXPECT_GT(summary.mesh_vertices, 1000u);
   EXPECT_TRUE(fs::is_regular_file(out / "mesh.ply"));
 
@@ -155,6 +156,7 @@ TEST(Pipeline, RunsEveryGoodFrameAndWritesTheOutputs) {
   for (std::size_t i = 0; i < lines.size(); ++i) {
     EXPECT_EQ(lines[i]["type"], "frame");
     EXPECT_TRUE(lines[i]["integrated"].get<bool>());
+    EXPECT_GT(lines[i]["rss_mb"].get<double>(), 10.0);  // this process's resident memory
     if (i > 0) {
       EXPECT_GT(lines[i]["index"], lines[i - 1]["index"]);  // in order
     }

@@ -61,6 +61,7 @@ struct RunSummary {
   double wall_s = 0.0;
   double fps = 0.0;
   double peak_rss_mb = 0.0;
+  std::optional<double> rss_growth_mb_per_1000_frames;  // over the second half of the frames
   std::size_t tsdf_bytes = 0;
   std::size_t tsdf_blocks_released = 0;  // far behind the camera (tsdf.release_distance_m)
   // The paper's summary (docs/METRICS.md): layers of the map that reuse a stored texture, by

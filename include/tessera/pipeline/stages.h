@@ -285,6 +285,9 @@ class StatsSink {
   // Capture-to-fusion latency of each frame of a live source, ms, in arrival order.
   const std::vector<double>& latenciesMs() const { return latencies_ms_; }
   std::size_t interruptions() const { return interruptions_; }
+  // How fast the resident memory grew over the second half of the run's frames (least-squares
+  // slope), MB per 1,000 frames; nothing for runs under 200 frames.
+  std::optional<double> rssGrowthMbPer1000Frames() const;
   const StageTimer& timer() const { return timer_; }
 
  private:
@@ -301,6 +304,7 @@ class StatsSink {
   eval::Trajectory estimate_;
   eval::Trajectory ground_truth_;
   std::vector<double> latencies_ms_;
+  std::vector<double> rss_mb_;  // resident memory after each frame
   std::size_t interruptions_ = 0;
   bool write_failed_ = false;
   // process() and writeCommit() run on different nodes; the stream is theirs in turn.
