@@ -1,9 +1,12 @@
 #!/bin/sh
-# Ctrl-C during a replay: the run stops reading, finishes and exports the map, and exits 0.
-# A second Ctrl-C aborts at once (status 130) and leaves the database readable.
-# Usage: interrupt_replay.sh TESSERA RECORDING OUT_DIR
+# Ctrl-C during a run (a replay, or a live device): the run stops reading, finishes and
+# exports the map, and exits 0. A second Ctrl-C aborts at once (status 130) and leaves the
+# database readable.
+# Usage: interrupt_run.sh TESSERA SOURCE OUT_DIR SOURCE_FRAMES STOP_AFTER [run options...]
+# (the signal comes once stats.jsonl shows STOP_AFTER frames)
 set -u
-tessera=$1 recording=$2 out=$3
+tessera=$1 recording=$2 out=$3 total=$4 stop_after=$5
+shift 5
 rm -rf "$out" && mkdir -p "$out"
 
 # Waits until the run's stats.jsonl has $2 frame lines, or fails after 60 s.
@@ -13,14 +16,14 @@ wait_for_frames() {
     n=$(grep -c '"type":"frame"' "$1/stats.jsonl" 2>/dev/null)
     [ "${n:-0}" -ge "$2" ] && return 0
     i=$((i + 1))
-    [ $i -gt 600 ] && { echo "FAIL: no $2 frames in $1/stats.jsonl"; return 1; }
+    [ $i -gt 1200 ] && { echo "FAIL: no $2 frames in $1/stats.jsonl after 120 s"; return 1; }
     sleep 0.1
   done
 }
 
-"$tessera" run "$recording" --poses gt --out "$out/once" >"$out/once.log" 2>&1 &
+"$tessera" run "$recording" "$@" --out "$out/once" >"$out/once.log" 2>&1 &
 pid=$!
-wait_for_frames "$out/once" 60 || exit 1
+wait_for_frames "$out/once" "$stop_after" || exit 1
 kill -INT $pid
 wait $pid
 status=$?
@@ -32,11 +35,11 @@ done
 grep -q '"stopped_on_request": true' "$out/once/report.json" || { echo "FAIL: not reported"; exit 1; }
 frames=$(sed -n 's/^ *"frames": \([0-9]*\),$/\1/p' "$out/once/report.json")
 echo "frames before the stop: $frames"
-[ "$frames" -ge 60 ] && [ "$frames" -lt 320 ] || { echo "FAIL: $frames frames"; exit 1; }
+[ "$frames" -ge "$stop_after" ] && [ "$frames" -lt "$total" ] || { echo "FAIL: $frames frames"; exit 1; }
 
-"$tessera" run "$recording" --poses gt --out "$out/twice" >"$out/twice.log" 2>&1 &
+"$tessera" run "$recording" "$@" --out "$out/twice" >"$out/twice.log" 2>&1 &
 pid=$!
-wait_for_frames "$out/twice" 60 || exit 1
+wait_for_frames "$out/twice" "$stop_after" || exit 1
 kill -INT $pid
 sleep 0.2
 kill -INT $pid
