@@ -96,8 +96,8 @@ void addMaterials(const MapModel& map, const std::filesystem::path& images_dir,
       tinygltf::Image image;
       image.name = material.image;
       image.mimeType = "image/png";
+      // Target 0: image data is neither a vertex nor an index buffer.
       image.bufferView = buffer.view(png.data(), png.size(), 0);
-      model.bufferViews.back().target = 0;  // image data is not a vertex or index buffer
       model.images.push_back(image);
       tinygltf::Sampler sampler;
       sampler.magFilter = TINYGLTF_TEXTURE_FILTER_LINEAR;
