@@ -1,5 +1,6 @@
 #include "tessera/match/pattern_alignment.h"
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <limits>
@@ -101,44 +102,60 @@ std::optional<core::Similarity2> alignPattern(const cv::Mat& tile_rgb, const cv:
   if (!linear) return std::nullopt;
 
   // The phase: the translation t within one stored cell minimising the colour difference
-  // between the new tile's points and the stored tile at S p + t (grid of about one texel,
-  // then half and quarter steps around the best).
+  // between the new tile's points and the stored tile at S p + t. A grid of about one texel,
+  // then half and quarter steps around the best. The grid costs (cell area)^2, so a large
+  // cell (a floor's tiles, hundreds of texels a side) is searched on a coarser grid with a
+  // subset of the points first, and its best few phases refined with every point.
   const std::vector<Sample> samples = tileSamples(tile_rgb, tile_mask, lattice);
   if (samples.empty()) return std::nullopt;
+  constexpr double kMaxPhases = 4096.0, kMaxCoarseSamples = 2048.0;
   const Eigen::Matrix2d to_lattice = stored.lattice.basis().inverse();
   const cv::Mat& tile = stored.tile_rgb;
   std::vector<Eigen::Vector2d> mapped(samples.size());
   for (std::size_t k = 0; k < samples.size(); ++k) mapped[k] = linear->apply(samples[k].point);
-  const auto cost = [&](const Eigen::Vector2d& t) {
+  const auto cost = [&](const Eigen::Vector2d& t, std::size_t stride) {
     double sum = 0.0;
-    for (std::size_t k = 0; k < samples.size(); ++k) {
+    for (std::size_t k = 0; k < samples.size(); k += stride) {
       const Eigen::Vector2d c = to_lattice * (mapped[k] + t);
       sum += (sampleWrapped(tile, c.x() * tile.cols, c.y() * tile.rows) - samples[k].rgb)
                  .squaredNorm();
     }
     return sum;
   };
-  const int n1 = std::max(1, static_cast<int>(std::ceil(stored.lattice.v1.norm())));
-  const int n2 = std::max(1, static_cast<int>(std::ceil(stored.lattice.cellArea() / n1)));
-  Eigen::Vector2d best_t = Eigen::Vector2d::Zero();
-  double best_cost = std::numeric_limits<double>::infinity();
+  const double cell_n1 = std::max(1.0, std::ceil(stored.lattice.v1.norm()));
+  const double cell_n2 = std::max(1.0, std::ceil(stored.lattice.cellArea() / cell_n1));
+  const double coarse = std::max(1.0, std::sqrt(cell_n1 * cell_n2 / kMaxPhases));  // texels
+  const int n1 = std::max(1, static_cast<int>(std::ceil(cell_n1 / coarse)));
+  const int n2 = std::max(1, static_cast<int>(std::ceil(cell_n2 / coarse)));
+  const auto stride = static_cast<std::size_t>(
+      std::max(1.0, std::ceil(static_cast<double>(samples.size()) / kMaxCoarseSamples)));
+  std::vector<std::pair<double, Eigen::Vector2d>> phases;  // (cost, t)
   for (int a = 0; a < n1; ++a) {
     for (int b = 0; b < n2; ++b) {
       const Eigen::Vector2d t = (static_cast<double>(a) / n1) * stored.lattice.v1 +
                                 (static_cast<double>(b) / n2) * stored.lattice.v2;
-      const double c = cost(t);
-      if (c < best_cost) best_cost = c, best_t = t;
+      phases.emplace_back(cost(t, stride), t);
     }
   }
-  for (const double step : {0.5, 0.25}) {
-    const Eigen::Vector2d centre = best_t;
-    for (int dy = -1; dy <= 1; ++dy) {
-      for (int dx = -1; dx <= 1; ++dx) {
-        const Eigen::Vector2d t = centre + step * Eigen::Vector2d(dx, dy);
-        const double c = cost(t);
-        if (c < best_cost) best_cost = c, best_t = t;
+  const std::size_t keep = std::min<std::size_t>(coarse > 1.0 || stride > 1 ? 4 : 1, phases.size());
+  std::partial_sort(phases.begin(), phases.begin() + static_cast<std::ptrdiff_t>(keep), phases.end(),
+                    [](const auto& x, const auto& y) { return x.first < y.first; });
+  Eigen::Vector2d best_t = phases.front().second;
+  double best_cost = std::numeric_limits<double>::infinity();
+  for (std::size_t p = 0; p < keep; ++p) {
+    Eigen::Vector2d t_p = phases[p].second;
+    double cost_p = cost(t_p, 1);
+    for (double step = 0.5 * coarse; step >= 0.25; step *= 0.5) {
+      const Eigen::Vector2d centre = t_p;
+      for (int dy = -1; dy <= 1; ++dy) {
+        for (int dx = -1; dx <= 1; ++dx) {
+          const Eigen::Vector2d t = centre + step * Eigen::Vector2d(dx, dy);
+          const double c = cost(t, 1);
+          if (c < cost_p) cost_p = c, t_p = t;
+        }
       }
     }
+    if (cost_p < best_cost) best_cost = cost_p, best_t = t_p;
   }
   return core::Similarity2{linear->a, linear->b, best_t.x(), best_t.y()};
 }
@@ -146,10 +163,14 @@ std::optional<core::Similarity2> alignPattern(const cv::Mat& tile_rgb, const cv:
 core::Similarity2 refineAlignment(const cv::Mat& rgb, const cv::Mat& mask,
                                   const StoredTexture& stored, const core::Similarity2& initial) {
   if (!stored.pattern || stored.tile_rgb.empty()) return initial;
-  constexpr int kStride = 4;  // texels between samples
+  // Texels between samples: every 4th each way, and at most about 40,000 samples, so that a
+  // large bitmap (a floor tile) costs no more than a wall.
+  constexpr double kMaxSamples = 40000.0;
+  const int stride = std::max(
+      4, static_cast<int>(std::ceil(std::sqrt(static_cast<double>(rgb.total()) / kMaxSamples))));
   std::vector<Sample> samples;
-  for (int row = kStride / 2; row < rgb.rows; row += kStride) {
-    for (int col = kStride / 2; col < rgb.cols; col += kStride) {
+  for (int row = stride / 2; row < rgb.rows; row += stride) {
+    for (int col = stride / 2; col < rgb.cols; col += stride) {
       if (!mask.empty() && mask.at<std::uint8_t>(row, col) == 0) continue;
       const cv::Vec3b& c = rgb.at<cv::Vec3b>(row, col);
       samples.push_back({Eigen::Vector2d(col, row), Eigen::Vector3f(c[0], c[1], c[2])});
@@ -170,9 +191,12 @@ core::Similarity2 refineAlignment(const cv::Mat& rgb, const cv::Mat& mask,
   const double reach = std::hypot(rgb.cols, rgb.rows) / initial.scale();
   core::Similarity2 best = initial;
   double best_cost = cost(best);
+  // Descent within a texel or so of the start (a wrong minimum a period away is not ours to
+  // find): each step size walks at most kMaxWalk steps.
+  constexpr int kMaxWalk = 16;
   for (double step = 1.0; step >= 0.125; step *= 0.5) {  // in texels at the far corner
-    for (bool improved = true; improved;) {
-      improved = false;
+    for (int walk = 0, improved = 1; improved != 0 && walk < kMaxWalk; ++walk) {
+      improved = 0;
       for (int k = 0; k < 4; ++k) {
         for (const double sign : {-1.0, 1.0}) {
           core::Similarity2 s = best;
@@ -182,7 +206,7 @@ core::Similarity2 refineAlignment(const cv::Mat& rgb, const cv::Mat& mask,
           if (k == 2) s.tx += d * initial.scale();
           if (k == 3) s.ty += d * initial.scale();
           const double c = cost(s);
-          if (c < best_cost) best_cost = c, best = s, improved = true;
+          if (c < best_cost) best_cost = c, best = s, improved = 1;
         }
       }
     }

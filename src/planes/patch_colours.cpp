@@ -12,13 +12,35 @@ namespace tessera::planes {
 
 namespace {
 
-// Per region of a frame: its patch's plane in the camera frame (n_C . X_C = d_C) and the
-// camera-frame position and axes of the patch's (u, v) frame, so each pixel costs a few
-// multiplies.
-struct ColourTarget {
+// One tile of a region's plane, and what this frame gave it.
+struct TileTarget {
+  Cell key;
   Patch* patch = nullptr;
+  std::size_t pixels = 0;
+  double distance_sum = 0.0;
+};
+
+// Per region of a frame: its patch's plane in the camera frame (n_C . X_C = d_C), the
+// camera-frame position and axes of the plane's (u, v) frame, so each pixel costs a few
+// multiplies, and the plane's tiles a pixel's colour can go to.
+struct ColourTarget {
+  std::vector<TileTarget> tiles;  // a plane not cut has one
+  TileGrid grid;
+  double cell_m = 0.0;
   Eigen::Vector3f n_C, origin_C, u_C, v_C;
   float d_C = 0.0F;
+
+  // The tile where the plane point (u, v) lies; none for a tile not cut yet or whose samples
+  // are out of memory.
+  TileTarget* tileAt(float u, float v) {
+    if (!grid.cut()) return &tiles.front();
+    const Cell key = grid.keyOf({static_cast<int>(std::floor(u / cell_m)),
+                                 static_cast<int>(std::floor(v / cell_m))});
+    for (TileTarget& tile : tiles) {
+      if (tile.key == key) return &tile;
+    }
+    return nullptr;
+  }
 };
 
 // What pass one learns of a pixel that sees its patch: where its ray meets the plane, its view
@@ -58,16 +80,22 @@ std::optional<Eigen::Vector3f> PatchMap::addColours(const core::Frame& frame,
   std::vector<ColourTarget> targets(ids.size());
   bool any = false;
   for (std::size_t r = 0; r < ids.size(); ++r) {
-    auto it = std::find_if(patches_.begin(), patches_.end(),
-                           [&](const Patch& p) { return p.id == ids[r]; });
-    if (it == patches_.end()) continue;
+    const Patch* region = find(ids[r]);
+    if (region == nullptr) continue;
     ColourTarget& target = targets[r];
-    target.patch = &*it;
-    target.n_C = (T_C_W.linear() * it->normal).cast<float>();
-    target.d_C = static_cast<float>(it->offset - it->normal.dot(T_W_C.translation()));
-    target.origin_C = (T_C_W * it->origin).cast<float>();
-    target.u_C = (T_C_W.linear() * it->u_axis).cast<float>();
-    target.v_C = (T_C_W.linear() * it->v_axis).cast<float>();
+    for (Patch& tile : patches_) {
+      if (tile.plane == region->plane && !tile.spilled_samples) {
+        target.tiles.push_back({tile.tile, &tile});
+      }
+    }
+    if (target.tiles.empty()) continue;
+    target.grid = planes_.at(region->plane).grid;
+    target.cell_m = config_.cell_m;
+    target.n_C = (T_C_W.linear() * region->normal).cast<float>();
+    target.d_C = static_cast<float>(region->offset - region->normal.dot(T_W_C.translation()));
+    target.origin_C = (T_C_W * region->origin).cast<float>();
+    target.u_C = (T_C_W.linear() * region->u_axis).cast<float>();
+    target.v_C = (T_C_W.linear() * region->v_axis).cast<float>();
     any = true;
   }
   if (!any) return std::nullopt;
@@ -86,7 +114,7 @@ std::optional<Eigen::Vector3f> PatchMap::addColours(const core::Frame& frame,
     const auto ray_y = static_cast<float>((y - k.cy) / k.fy);
     for (int x = 0; x < frame.rgb.cols; ++x) {
       const std::uint8_t l = label[x / scale];
-      if (l >= targets.size() || targets[l].patch == nullptr || depth[x] == 0) continue;
+      if (l >= targets.size() || targets[l].tiles.empty() || depth[x] == 0) continue;
       const ColourTarget& target = targets[l];
       const Eigen::Vector3f ray(static_cast<float>((x - k.cx) / k.fx), ray_y, 1.0F);
       const float along = target.n_C.dot(ray);
@@ -119,7 +147,9 @@ std::optional<Eigen::Vector3f> PatchMap::addColours(const core::Frame& frame,
       const auto* pixel = plane_pixels.ptr<PlanePixel>(y);
       for (int x = 0; x < frame.rgb.cols; x += 2) {
         if (sees[x] == 0 || !smooth(frame.rgb, x, y)) continue;
-        const auto held = targets[label[x / scale]].patch->samples.colourAt(pixel[x].u, pixel[x].v);
+        const TileTarget* tile = targets[label[x / scale]].tileAt(pixel[x].u, pixel[x].v);
+        if (tile == nullptr) continue;
+        const auto held = tile->patch->samples.colourAt(pixel[x].u, pixel[x].v);
         if (held) pairs.push_back({Eigen::Vector3f(rgb[x][0], rgb[x][1], rgb[x][2]), *held});
       }
     }
@@ -129,8 +159,6 @@ std::optional<Eigen::Vector3f> PatchMap::addColours(const core::Frame& frame,
 
   // Pass two: the samples, weighted by their view and the frame's sharpness.
   const auto frame_weight = static_cast<float>(std::max(sharpness, 1e-6));
-  std::vector<std::size_t> pixels_of(targets.size(), 0);
-  std::vector<double> distance_of(targets.size(), 0.0);
   for (int y = 0; y < frame.rgb.rows; ++y) {
     const auto* label = detection.labels.ptr<std::uint8_t>(y / scale);
     const auto* sees = sees_plane.ptr<std::uint8_t>(y);
@@ -138,26 +166,29 @@ std::optional<Eigen::Vector3f> PatchMap::addColours(const core::Frame& frame,
     const auto* pixel = plane_pixels.ptr<PlanePixel>(y);
     for (int x = 0; x < frame.rgb.cols; ++x) {
       if (sees[x] == 0) continue;
-      const std::uint8_t l = label[x / scale];
+      TileTarget* tile = targets[label[x / scale]].tileAt(pixel[x].u, pixel[x].v);
+      if (tile == nullptr) continue;
       std::array<std::uint8_t, 3> colour;
       for (int c = 0; c < 3; ++c) {
         colour[static_cast<std::size_t>(c)] =
             cv::saturate_cast<std::uint8_t>(gain[c] * static_cast<float>(rgb[x][c]));
       }
-      targets[l].patch->samples.add(pixel[x].u, pixel[x].v, colour, pixel[x].weight * frame_weight);
-      ++pixels_of[l];
-      distance_of[l] += pixel[x].distance;
+      tile->patch->samples.add(pixel[x].u, pixel[x].v, colour, pixel[x].weight * frame_weight);
+      ++tile->pixels;
+      tile->distance_sum += pixel[x].distance;
     }
   }
   const Eigen::Vector3d log_gain = gain.cast<double>().array().log();
   bool sampled = false;
-  for (std::size_t l = 0; l < targets.size(); ++l) {
-    if (pixels_of[l] == 0) continue;
-    Patch& patch = *targets[l].patch;
-    patch.footprint_sum_m += distance_of[l] / k.fx;
-    patch.footprint_pixels += pixels_of[l];
-    patch.log_gain_sum += static_cast<double>(pixels_of[l]) * log_gain;
-    sampled = true;
+  for (ColourTarget& target : targets) {
+    for (TileTarget& tile : target.tiles) {
+      if (tile.pixels == 0) continue;
+      Patch& patch = *tile.patch;
+      patch.footprint_sum_m += tile.distance_sum / k.fx;
+      patch.footprint_pixels += tile.pixels;
+      patch.log_gain_sum += static_cast<double>(tile.pixels) * log_gain;
+      sampled = true;
+    }
   }
   if (!sampled) return std::nullopt;
   return gain;

@@ -3,14 +3,11 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <map>
 
-#include <fmt/format.h>
-#include <spdlog/spdlog.h>
 #include <Eigen/Geometry>
 
 #include <opencv2/core.hpp>
-
-#include "tessera/core/error.h"
 
 namespace tessera::planes {
 
@@ -82,42 +79,179 @@ bool PatchMap::continues(const Patch& patch, const PlaneFit& region,
   return false;
 }
 
-void PatchMap::addObservation(Patch& patch, const std::vector<Eigen::Vector3d>& points,
-                              const PointMoments& moments) const {
-  Cell last{std::numeric_limits<int>::min(), 0};
-  for (const auto& X : points) {
-    const Cell c = patch.cellOf(X, config_.cell_m);
-    if (c != last) patch.cells.insert(c);
-    last = c;
+namespace {
+
+int& axis(Cell& cell, int a) { return a == 0 ? cell.first : cell.second; }
+int axis(const Cell& cell, int a) { return a == 0 ? cell.first : cell.second; }
+
+int floorDiv(int a, int b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
+
+}  // namespace
+
+Cell TileGrid::keyOf(const Cell& cell) const {
+  Cell key{0, 0};
+  for (int a = 0; a < 2; ++a) {
+    if (anchor[a]) axis(key, a) = floorDiv(axis(cell, a) - *anchor[a], tile_cells);
   }
-  patch.moments.add(moments);
-  refit(patch);
+  return key;
 }
 
-void PatchMap::refit(Patch& patch) {
-  const PlaneFit plane = fitPlane(patch.moments);
-  // Keep the orientation the patch was created with.
-  const double sign = plane.normal.dot(patch.normal) < 0.0 ? -1.0 : 1.0;
-  patch.normal = sign * plane.normal;
-  patch.offset = sign * plane.offset;
+Patch& PatchMap::patchWithId(int id) {
+  return *std::find_if(patches_.begin(), patches_.end(), [&](const Patch& p) { return p.id == id; });
 }
 
-void PatchMap::absorb(Patch& into, const Patch& other) const {
-  for (const Cell& cell : other.cells) {
-    into.cells.insert(into.cellOf(other.cellCentre(cell, config_.cell_m), config_.cell_m));
+Patch& PatchMap::tileAt(int plane_id, const Cell& key) {
+  for (Patch& patch : patches_) {
+    if (patch.plane == plane_id && patch.tile == key) return patch;
   }
-  // Samples move into the kept patch's plane frame.
-  for (ColourSample sample : other.samples.all()) {
-    const Eigen::Vector3d X = other.origin + sample.u * other.u_axis + sample.v * other.v_axis;
-    sample.u = static_cast<float>((X - into.origin).dot(into.u_axis));
-    sample.v = static_cast<float>((X - into.origin).dot(into.v_axis));
-    into.samples.add(sample);
+  const Patch& first = patchWithId(plane_id);
+  Patch tile;
+  tile.id = next_id_++;
+  tile.plane = plane_id;
+  tile.tile = key;
+  tile.normal = first.normal;
+  tile.offset = first.offset;
+  tile.origin = first.origin;
+  tile.u_axis = first.u_axis;
+  tile.v_axis = first.v_axis;
+  tile.samples = ColourSamples(config_.sample_cell_m);
+  patches_.push_back(std::move(tile));
+  return patches_.back();
+}
+
+void PatchMap::extendGrid(PlaneState& plane, const std::vector<Cell>& cells) const {
+  if (cells.empty()) return;
+  Cell lo = cells.front(), hi = cells.front();
+  for (const Cell& c : cells) {
+    for (int a = 0; a < 2; ++a) {
+      axis(lo, a) = std::min(axis(lo, a), axis(c, a));
+      axis(hi, a) = std::max(axis(hi, a), axis(c, a));
+    }
   }
-  into.footprint_sum_m += other.footprint_sum_m;
-  into.footprint_pixels += other.footprint_pixels;
-  into.log_gain_sum += other.log_gain_sum;
-  into.moments.add(other.moments);
-  refit(into);
+  const int size = plane.grid.tile_cells;
+  for (int a = 0; a < 2; ++a) {
+    const int old_lo = axis(plane.lo, a), old_hi = axis(plane.hi, a);
+    const int new_lo = plane.has_cells ? std::min(old_lo, axis(lo, a)) : axis(lo, a);
+    const int new_hi = plane.has_cells ? std::max(old_hi, axis(hi, a)) : axis(hi, a);
+    if (size > 0 && !plane.grid.anchor[a] && new_hi - new_lo + 1 > size) {
+      // The tile that held the whole plane so far stays tile 0: it spans at most one tile.
+      if (!plane.has_cells || new_hi >= old_lo + size) {
+        plane.grid.anchor[a] = plane.has_cells ? old_lo : new_lo;
+      } else {
+        plane.grid.anchor[a] = old_hi + 1 - size;
+      }
+    }
+    axis(plane.lo, a) = new_lo;
+    axis(plane.hi, a) = new_hi;
+  }
+  plane.has_cells = true;
+}
+
+int PatchMap::placeCells(int plane_id, const std::vector<Cell>& cells) {
+  PlaneState& plane = planes_.at(plane_id);
+  extendGrid(plane, cells);
+  std::map<Cell, std::vector<Cell>> by_tile;
+  for (const Cell& c : cells) by_tile[plane.grid.keyOf(c)].push_back(c);
+  int most_id = plane_id;
+  std::size_t most = 0;
+  for (const auto& [key, tile_cells] : by_tile) {
+    Patch& tile = tileAt(plane_id, key);
+    restoreSamples(tile);
+    tile.cells.insert(tile_cells.begin(), tile_cells.end());
+    seen_this_frame_.insert(tile.id);
+    if (tile_cells.size() > most) {
+      most = tile_cells.size();
+      most_id = tile.id;
+    }
+  }
+  return most_id;
+}
+
+int PatchMap::placePoints(int plane_id, const std::vector<Eigen::Vector3d>& points,
+                          const PointMoments& moments) {
+  std::vector<Cell> cells;
+  {
+    const Patch& first = patchWithId(plane_id);
+    Cell last{std::numeric_limits<int>::min(), 0};
+    for (const auto& X : points) {
+      const Cell c = first.cellOf(X, config_.cell_m);
+      if (c != last) cells.push_back(c);  // points come in raster order
+      last = c;
+    }
+  }
+  const int id = placeCells(plane_id, cells);
+  planes_.at(plane_id).moments.add(moments);
+  refitPlane(plane_id);
+  return id;
+}
+
+void PatchMap::refitPlane(int plane_id) {
+  const PlaneFit fit = fitPlane(planes_.at(plane_id).moments);
+  // Keep the orientation the plane was created with.
+  const double sign = fit.normal.dot(patchWithId(plane_id).normal) < 0.0 ? -1.0 : 1.0;
+  for (Patch& tile : patches_) {
+    if (tile.plane != plane_id) continue;
+    tile.normal = sign * fit.normal;
+    tile.offset = sign * fit.offset;
+  }
+}
+
+void PatchMap::mergePlane(int into_id, int from_id, std::vector<int>& ids) {
+  std::vector<Patch> from;
+  for (auto it = patches_.begin(); it != patches_.end();) {
+    if (it->plane != from_id) {
+      ++it;
+      continue;
+    }
+    from.push_back(std::move(*it));
+    it = patches_.erase(it);
+  }
+  planes_.at(into_id).moments.add(planes_.at(from_id).moments);
+  planes_.erase(from_id);
+
+  for (Patch& gone : from) {
+    restoreSamples(gone);
+    if (gone.version > 0) pending_.push_back({PatchEvent::Kind::kRetired, gone.id, gone.version});
+    seen_this_frame_.erase(gone.id);
+    const Patch frame = [&] {  // the receiving plane's frame (no cells, no samples)
+      const Patch& first = patchWithId(into_id);
+      Patch copy;
+      copy.origin = first.origin;
+      copy.u_axis = first.u_axis;
+      copy.v_axis = first.v_axis;
+      return copy;
+    }();
+    std::vector<Cell> cells;
+    cells.reserve(gone.cells.size());
+    for (const Cell& cell : gone.cells) {
+      cells.push_back(frame.cellOf(gone.cellCentre(cell, config_.cell_m), config_.cell_m));
+    }
+    const int took_most = placeCells(into_id, cells);
+    Patch& heir = patchWithId(took_most);
+    heir.footprint_sum_m += gone.footprint_sum_m;
+    heir.footprint_pixels += gone.footprint_pixels;
+    heir.log_gain_sum += gone.log_gain_sum;
+    std::replace(ids.begin(), ids.end(), gone.id, took_most);
+
+    // Samples move into the receiving plane's frame and tiles; one where no tile has a cell
+    // shows nothing of the plane and is dropped.
+    const TileGrid& grid = planes_.at(into_id).grid;
+    std::map<Cell, Patch*> tiles;
+    for (Patch& tile : patches_) {
+      if (tile.plane == into_id && !tile.spilled_samples) tiles[tile.tile] = &tile;
+    }
+    for (ColourSample sample : gone.samples.all()) {
+      const Eigen::Vector3d X = gone.origin + sample.u * gone.u_axis + sample.v * gone.v_axis;
+      sample.u = static_cast<float>((X - frame.origin).dot(frame.u_axis));
+      sample.v = static_cast<float>((X - frame.origin).dot(frame.v_axis));
+      const Cell cell{static_cast<int>(std::floor(sample.u / config_.cell_m)),
+                      static_cast<int>(std::floor(sample.v / config_.cell_m))};
+      if (const auto it = tiles.find(grid.keyOf(cell)); it != tiles.end()) {
+        it->second->samples.add(sample);
+      }
+    }
+  }
+  refitPlane(into_id);
 }
 
 std::vector<int> PatchMap::add(const std::vector<PlaneObservation>& observations) {
@@ -130,15 +264,16 @@ std::vector<int> PatchMap::add(const std::vector<PlaneObservation>& observations
     PointMoments moments;
     for (const auto& X : observation.points_W) moments.add(X);
     const PlaneFit plane = fitPlane(moments);
-    std::vector<std::size_t> matches;
-    for (std::size_t i = 0; i < patches_.size(); ++i) {
-      if (continues(patches_[i], plane, observation.points_W)) {
-        matches.push_back(i);
-      }
+    // The planes the region continues, oldest first (one touching tile each is enough).
+    std::vector<int> planes;
+    for (const Patch& patch : patches_) {
+      if (std::find(planes.begin(), planes.end(), patch.plane) != planes.end()) continue;
+      if (continues(patch, plane, observation.points_W)) planes.push_back(patch.plane);
     }
-    if (matches.empty()) {
+    if (planes.empty()) {
       Patch patch;
       patch.id = next_id_++;
+      patch.plane = patch.id;
       const double facing =
           plane.normal.dot(observation.camera_W - plane.centroid) > 0.0 ? -1.0 : 1.0;
       patch.normal = facing * plane.normal;
@@ -147,30 +282,17 @@ std::vector<int> PatchMap::add(const std::vector<PlaneObservation>& observations
       patch.u_axis = plane.major_axis;  // eigenvectors: already orthogonal to the normal
       patch.v_axis = patch.normal.cross(patch.u_axis);
       patch.samples = ColourSamples(config_.sample_cell_m);
-      addObservation(patch, observation.points_W, moments);
+      PlaneState& state = planes_[patch.id];
+      if (config_.tile_m > 0.0) {
+        state.grid.tile_cells = std::max(1, static_cast<int>(std::lround(config_.tile_m / config_.cell_m)));
+      }
+      planes.push_back(patch.id);
       patches_.push_back(std::move(patch));
-      ids.push_back(patches_.back().id);
-      seen_this_frame_.insert(patches_.back().id);
-      continue;
     }
-    // The region joins every patch it continues: they were parts of one plane.
-    for (const std::size_t m : matches) restoreSamples(patches_[m]);
-    Patch& kept = patches_[matches.front()];
-    for (std::size_t m = matches.size(); m-- > 1;) {
-      absorb(kept, patches_[matches[m]]);
-    }
-    addObservation(kept, observation.points_W, moments);
-    const int kept_id = kept.id;
-    for (std::size_t m = matches.size(); m-- > 1;) {
-      const Patch& gone = patches_[matches[m]];
-      if (gone.version > 0) pending_.push_back({PatchEvent::Kind::kRetired, gone.id, gone.version});
-      seen_this_frame_.erase(gone.id);
-      // Ids already handed out for this frame's earlier regions now live on in the kept patch.
-      std::replace(ids.begin(), ids.end(), gone.id, kept_id);
-      patches_.erase(patches_.begin() + static_cast<std::ptrdiff_t>(matches[m]));
-    }
-    ids.push_back(kept_id);
-    seen_this_frame_.insert(kept_id);
+    // The region joins every plane it continues: they were parts of one plane.
+    const int kept = planes.front();
+    for (std::size_t m = planes.size(); m-- > 1;) mergePlane(kept, planes[m], ids);
+    ids.push_back(placePoints(kept, observation.points_W, moments));
   }
   return ids;
 }
@@ -201,100 +323,6 @@ PatchSnapshot PatchMap::snapshot(const Patch& patch) const {
         patch.footprint_sum_m / static_cast<double>(patch.footprint_pixels);
   }
   return snapshot;
-}
-
-void PatchMap::finalize(Patch& patch, std::vector<PatchEvent>& events) const {
-  patch.version += 1;
-  patch.finalized = true;
-  patch.finalized_area_m2 = areaM2(patch);
-  events.push_back(
-      {PatchEvent::Kind::kFinalized, patch.id, patch.version, patch.finalized_area_m2});
-}
-
-std::vector<PatchEvent> PatchMap::endFrame(long frame_index) {
-  std::vector<PatchEvent> events = std::move(pending_);
-  pending_.clear();
-  for (Patch& patch : patches_) {
-    const double area = areaM2(patch);
-    if (seen_this_frame_.count(patch.id) == 0) {
-      const bool gone_long = frame_index - patch.last_seen_frame >= config_.out_of_view_frames;
-      if (!patch.finalized && gone_long && area >= config_.min_area_m2) finalize(patch, events);
-      continue;
-    }
-    patch.last_seen_frame = frame_index;
-    patch.frames_seen += 1;
-    patch.area_in_view.push_back(area);
-    while (patch.area_in_view.size() > static_cast<std::size_t>(config_.stable_frames) + 1) {
-      patch.area_in_view.pop_front();
-    }
-    if (patch.finalized && area > patch.finalized_area_m2 * (1.0 + config_.max_growth)) {
-      patch.finalized = false;  // it grows again: a new version will follow
-    }
-    const bool stable =
-        patch.area_in_view.size() > static_cast<std::size_t>(config_.stable_frames) &&
-        area <= patch.area_in_view.front() * (1.0 + config_.max_growth);
-    if (!patch.finalized && stable && area >= config_.min_area_m2) finalize(patch, events);
-  }
-  seen_this_frame_.clear();
-  return events;
-}
-
-void PatchMap::setSampleSpillDir(std::filesystem::path dir) {
-  std::error_code ec;
-  std::filesystem::create_directories(dir, ec);
-  if (ec) {
-    spdlog::warn("{}: cannot create it ({}); colour samples stay in memory", dir.string(),
-                 ec.message());
-    return;
-  }
-  spill_dir_ = std::move(dir);
-}
-
-std::size_t PatchMap::releaseIdleSamples(long frame_index) {
-  if (!spill_dir_ || config_.release_samples_after_frames <= 0 || spill_failed_) return 0;
-  std::size_t released = 0;
-  for (Patch& patch : patches_) {
-    if (!patch.finalized || patch.spilled_samples || patch.samples.size() == 0 ||
-        frame_index - patch.last_seen_frame < config_.release_samples_after_frames) {
-      continue;
-    }
-    const std::filesystem::path path = *spill_dir_ / fmt::format("patch_{}.samples", patch.id);
-    try {
-      patch.samples.save(path);
-    } catch (const core::Error& e) {
-      spdlog::warn("{}; colour samples stay in memory from now on", e.what());
-      spill_failed_ = true;
-      std::error_code ec;
-      std::filesystem::remove(path, ec);
-      break;
-    }
-    patch.samples = ColourSamples(config_.sample_cell_m);
-    patch.spilled_samples = path;
-    ++released;
-  }
-  samples_released_ += released;
-  return released;
-}
-
-void PatchMap::restoreSamples(Patch& patch) const {
-  if (!patch.spilled_samples) return;
-  try {
-    patch.samples = ColourSamples::load(*patch.spilled_samples);
-  } catch (const core::Error& e) {  // the patch goes on with the samples it gets from now
-    spdlog::error("patch {}: {}; its earlier colours are lost", patch.id, e.what());
-  }
-  std::error_code ec;
-  std::filesystem::remove(*patch.spilled_samples, ec);
-  patch.spilled_samples.reset();
-}
-
-std::vector<PatchEvent> PatchMap::finalizeAll() {
-  std::vector<PatchEvent> events = std::move(pending_);
-  pending_.clear();
-  for (Patch& patch : patches_) {
-    if (!patch.finalized && areaM2(patch) >= config_.min_area_m2) finalize(patch, events);
-  }
-  return events;
 }
 
 const Patch* PatchMap::find(int id) const {

@@ -39,6 +39,7 @@ void readConfig(const core::ConfigSection& section, PatchMapConfig& config) {
   section.read("out_of_view_frames", config.out_of_view_frames);
   section.read("min_area_m2", config.min_area_m2);
   section.read("release_samples_after_frames", config.release_samples_after_frames);
+  section.read("tile_m", config.tile_m);
   section.read("sample_cell_m", config.sample_cell_m);
   section.read("colour_every_n_frames", config.colour_every_n_frames);
   section.read("colour_depth_tolerance_m", config.colour_depth_tolerance_m);
@@ -48,6 +49,9 @@ void readConfig(const core::ConfigSection& section, PatchMapConfig& config) {
   if (config.max_normal_angle_deg <= 0.0 || config.max_offset_m <= 0.0 || config.cell_m <= 0.0) {
     throw core::ConfigError(
         "patches: max_normal_angle_deg, max_offset_m and cell_m must be positive");
+  }
+  if (config.tile_m < 0.0) {
+    throw core::ConfigError("patches: tile_m must be 0 (never cut planes) or positive");
   }
   if (config.release_samples_after_frames < 0) {
     throw core::ConfigError("patches: release_samples_after_frames must be 0 (keep) or positive");

@@ -1,5 +1,7 @@
 // A pattern stored from one patch is found in another through NCC, at the other's phase and
 // quarter turn, and renders that patch faithfully: the phase travels in the instance.
+#include <cmath>
+
 #include <gtest/gtest.h>
 #include <opencv2/core.hpp>
 
@@ -95,6 +97,31 @@ TEST(PatternReuse, TheLatticesAlignTwoPatchesTurnedAFewDegreesApart) {
                                             {{20.0, 0.0}, {0.0, 20.0}}, config);
   EXPECT_FALSE(match::alignPattern(other.pattern->tile_rgb, other.pattern->tile_mask,
                                    other.pattern->lattice, *square));
+}
+
+// A floor's tiles can be a cell of hundreds of texels a side: the phase is searched on a
+// coarser grid first, and still lands on the stored tile's phase.
+TEST(PatternReuse, ALargeCellFindsItsPhaseThroughTheCoarseSearch) {
+  const int w = 160, h = 120;  // 19,200 texels: more phases than the one-texel grid tries
+  const cv::Mat tile = testing::randomTile(w, h, 9);
+  const core::Lattice2 lattice{{static_cast<double>(w), 0.0}, {0.0, static_cast<double>(h)}};
+  const match::MatchConfig config;
+  const auto stored = match::patternTexture(1, tile, {}, lattice, config);
+  // The same tile, starting 37 texels along and 51 down: another phase of the same floor.
+  cv::Mat shifted(h, w, CV_8UC3);
+  for (int j = 0; j < h; ++j) {
+    for (int i = 0; i < w; ++i) shifted.at<cv::Vec3b>(j, i) = tile.at<cv::Vec3b>((j + 51) % h, (i + 37) % w);
+  }
+  const auto aligned = match::alignPattern(shifted, {}, lattice, *stored);
+  ASSERT_TRUE(aligned);
+  EXPECT_NEAR(aligned->scale(), 1.0, 1e-6);
+  const double tx = std::fmod(aligned->tx + w, w), ty = std::fmod(aligned->ty + h, h);
+  // Within a texel (the stored tile is sampled at texel corners, the new one at centres).
+  EXPECT_NEAR(tx, 37.0, 1.0);
+  EXPECT_NEAR(ty, 51.0, 1.0);
+  const match::Fidelity fidelity =
+      match::measureFidelity(shifted, {}, match::renderStored(*stored, *aligned, w, h));
+  EXPECT_GT(fidelity.psnr_db, 30.0) << "phase " << tx << ", " << ty;
 }
 
 }  // namespace

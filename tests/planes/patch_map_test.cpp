@@ -1,5 +1,8 @@
 #include <algorithm>
 #include <filesystem>
+#include <limits>
+#include <map>
+#include <set>
 #include <random>
 #include <tuple>
 
@@ -140,6 +143,84 @@ TEST(PatchMap, AWallPartlyHiddenByClutterIsOnePatchWithAHoleThatFillsInFromOther
   std::size_t walls = 0;
   for (const Patch& p : map.patches()) walls += std::abs(std::abs(p.offset) - 2.0) < 0.03 ? 1 : 0;
   EXPECT_EQ(walls, 1u);
+}
+
+// Tiles: a plane that outgrows tile_m is cut on a grid of its plane into patches of at most
+// tile_m a side, which share the plane; surfaces up to tile_m stay one patch.
+struct CellBounds {
+  int min_u = std::numeric_limits<int>::max(), max_u = std::numeric_limits<int>::min();
+  int min_v = std::numeric_limits<int>::max(), max_v = std::numeric_limits<int>::min();
+};
+
+CellBounds boundsOf(const Patch& patch) {
+  CellBounds b;
+  for (const Cell& c : patch.cells) {
+    b.min_u = std::min(b.min_u, c.first);
+    b.max_u = std::max(b.max_u, c.first);
+    b.min_v = std::min(b.min_v, c.second);
+    b.max_v = std::max(b.max_v, c.second);
+  }
+  return b;
+}
+
+TEST(PatchTiles, AFloorLongerThanATileIsCutIntoTilesOfOnePlane) {
+  PatchMapConfig config;
+  config.tile_m = 6.0;
+  PatchMap map(config);
+  // A 14 m x 1 m corridor floor, seen 1.2 m at a time as the robot drives along it.
+  for (double x = 0.0; x < 14.0; x += 1.0) {
+    map.add({strip(x, std::min(x + 1.2, 14.0), 0.0, 1.0, 0.0, 0.003, 0.0, 7)});
+  }
+  ASSERT_EQ(map.patches().size(), 3u);  // 14 m in 6 m tiles
+  const int cells_per_tile = static_cast<int>(std::lround(6.0 / config.cell_m));
+  std::set<Cell> all_cells;
+  double area = 0.0;
+  for (const Patch& tile : map.patches()) {
+    EXPECT_EQ(tile.plane, map.patches().front().id);
+    EXPECT_EQ(tile.normal, map.patches().front().normal);  // one plane, exactly
+    EXPECT_EQ(tile.offset, map.patches().front().offset);
+    EXPECT_EQ(tile.origin, map.patches().front().origin);  // one cell grid
+    const CellBounds b = boundsOf(tile);
+    EXPECT_LE(b.max_u - b.min_u + 1, cells_per_tile);
+    EXPECT_LE(b.max_v - b.min_v + 1, cells_per_tile);
+    for (const Cell& c : tile.cells) EXPECT_TRUE(all_cells.insert(c).second);  // disjoint
+    area += map.areaM2(tile);
+  }
+  EXPECT_NEAR(area, 14.0, 0.8);
+  EXPECT_NEAR(std::abs(map.patches().front().offset), 0.0, 0.002);
+}
+
+TEST(PatchTiles, ASurfaceNoLongerThanATileIsNeverCut) {
+  PatchMapConfig config;
+  config.tile_m = 6.0;
+  PatchMap map(config);
+  // Seen first near one end, then growing to 5.9 m: tile 0 is placed to hold it whole.
+  for (double x = 5.0; x >= 0.0; x -= 1.0) map.add({strip(x, std::min(x + 1.1, 5.9), 0.0, 2.0, 0.75)});
+  ASSERT_EQ(map.patches().size(), 1u);
+  EXPECT_NEAR(map.areaM2(map.patches().front()), 5.9 * 2.0, 0.5);
+}
+
+TEST(PatchTiles, APlaneJoinedFromTwoPartsIsCutWhenTheJoinOutgrowsATile) {
+  PatchMapConfig config;
+  config.tile_m = 2.0;
+  PatchMap map(config);
+  map.add({strip(0.0, 1.5, 0.0, 0.8, 0.75)});
+  map.add({strip(2.5, 4.0, 0.0, 0.8, 0.75)});
+  ASSERT_EQ(map.patches().size(), 2u);
+  ASSERT_NE(map.patches()[0].plane, map.patches()[1].plane);
+  const auto joined = map.add({strip(1.4, 2.6, 0.0, 0.8, 0.75)});
+  ASSERT_GE(map.patches().size(), 2u);
+  double area = 0.0;
+  bool region_tile_exists = false;
+  for (const Patch& tile : map.patches()) {
+    EXPECT_EQ(tile.plane, 0);  // the older plane took the other in
+    const CellBounds b = boundsOf(tile);
+    EXPECT_LE(b.max_u - b.min_u + 1, 40);
+    area += map.areaM2(tile);
+    region_tile_exists |= tile.id == joined[0];
+  }
+  EXPECT_TRUE(region_tile_exists);
+  EXPECT_NEAR(area, 4.0 * 0.8, 0.3);
 }
 
 // Finalization on a synthetic sequence: a table top grows by 10 cm per frame for 20 frames,
@@ -339,6 +420,89 @@ TEST(PatchLifecycle, SamplesStayInMemoryWhenTheirFileCannotBeWritten) {
   EXPECT_EQ(map.releaseIdleSamples(30), 0u);
   EXPECT_GT(map.patches().front().samples.size(), 100000u);
   EXPECT_FALSE(map.patches().front().spilled_samples);
+}
+
+// A robot that drives on along a cut floor re-finalizes the tiles that grow, never the ones
+// behind it: each version's samples and bitmap stay within one tile.
+TEST(PatchTiles, DrivingOnReFinalizesOnlyTheTilesThatGrow) {
+  PatchMapConfig config = lifecycleConfig();
+  config.tile_m = 2.0;
+  PatchMap map(config);
+  long frame = 0;
+  for (; frame < 12; ++frame) {  // the first 5.9 m, in view long enough to be finalized
+    map.add({strip(0.0, 5.9, 0.0, 1.0, 0.0)});
+    map.endFrame(frame);
+  }
+  std::map<int, int> first_versions;
+  for (const Patch& tile : map.patches()) {
+    EXPECT_EQ(tile.version, 1);
+    first_versions[tile.id] = tile.version;
+  }
+  ASSERT_GE(first_versions.size(), 3u);
+  std::vector<PatchEvent> later;
+  for (long end = frame + 12; frame < end; ++frame) {  // on to 8 m, the start out of view
+    map.add({strip(5.5, 8.0, 0.0, 1.0, 0.0)});
+    for (const auto& e : finalizations(map.endFrame(frame))) later.push_back(e);
+  }
+  ASSERT_FALSE(later.empty());
+  for (const PatchEvent& e : later) {
+    const Patch* tile = map.find(e.id);
+    ASSERT_NE(tile, nullptr);
+    // Only tiles reaching past 5.5 m: the start of the floor keeps its first version.
+    const CellBounds b = boundsOf(*tile);
+    const Eigen::Vector3d far_end = tile->cellCentre({b.max_u, b.max_v}, config.cell_m);
+    const Eigen::Vector3d near_end = tile->cellCentre({b.min_u, b.min_v}, config.cell_m);
+    EXPECT_GT(std::max(far_end.x(), near_end.x()), 5.4) << "tile " << e.id;
+    EXPECT_LE(e.area_m2, 2.0 * 2.0 + 1e-9);
+  }
+  for (const auto& [id, version] : first_versions) {
+    const Patch* tile = map.find(id);
+    const CellBounds b = boundsOf(*tile);
+    const double reach = std::max(tile->cellCentre({b.max_u, b.max_v}, config.cell_m).x(),
+                                  tile->cellCentre({b.min_u, b.min_v}, config.cell_m).x());
+    if (reach < 5.4) {
+      EXPECT_EQ(tile->version, 1) << "tile " << id;
+    }
+  }
+}
+
+// A frame's colours go to the tile where each pixel meets the plane, and tiles lose nothing
+// against the plane not cut.
+TEST(PatchTiles, ColoursGoToTheTileWhereThePixelMeetsThePlane) {
+  const Eigen::Vector3d n = Eigen::Vector3d(0.1, -0.2, -1.0).normalized();
+  const core::Isometry T_W_C = core::Isometry::Identity();
+  const core::Frame frame =
+      test::renderPlane(test::kinectIntrinsics(), T_W_C, n, n.dot(Eigen::Vector3d(0, 0, 1.5)));
+  const PlaneDetection detection = PlaneDetector(PlaneDetectorConfig{}).detect(frame);
+  PatchMapConfig whole_config;
+  whole_config.tile_m = 0.0;
+  PatchMap whole(whole_config);
+  whole.addColours(frame, detection, T_W_C, whole.add(observationsOf(frame, detection, T_W_C)));
+  ASSERT_EQ(whole.patches().size(), 1u);
+
+  PatchMapConfig cut_config;
+  cut_config.tile_m = 0.5;
+  PatchMap cut(cut_config);
+  const auto ids = cut.add(observationsOf(frame, detection, T_W_C));
+  cut.addColours(frame, detection, T_W_C, ids);
+  ASSERT_GE(cut.patches().size(), 6u);  // about 1.6 x 1.3 m in 0.5 m tiles
+  std::size_t samples = 0;
+  const int cells_per_tile = static_cast<int>(std::lround(0.5 / cut_config.cell_m));
+  for (const Patch& tile : cut.patches()) {
+    const CellBounds b = boundsOf(tile);
+    for (const ColourSample& s : tile.samples.all()) {
+      // Within the tile's window of cells (its cells' bounds, grown to a whole tile).
+      const int cu = static_cast<int>(std::floor(s.u / cut_config.cell_m));
+      const int cv = static_cast<int>(std::floor(s.v / cut_config.cell_m));
+      EXPECT_GT(cu, b.max_u - cells_per_tile);
+      EXPECT_LT(cu, b.min_u + cells_per_tile);
+      EXPECT_GT(cv, b.max_v - cells_per_tile);
+      EXPECT_LT(cv, b.min_v + cells_per_tile);
+    }
+    samples += tile.samples.size();
+  }
+  const double expected = static_cast<double>(whole.patches().front().samples.size());
+  EXPECT_NEAR(static_cast<double>(samples), expected, 0.01 * expected);
 }
 
 }  // namespace

@@ -4,10 +4,14 @@
 // found to be one plane are merged, and each patch's plane is refitted from all its points.
 // Each patch collects colour samples from the raw frames and is finalized once it stops
 // growing or leaves the view; a finalized patch that grows again is finalized anew as a
-// higher version of the same id.
+// higher version of the same id. A plane larger than one tile (PatchMapConfig::tile_m) is cut
+// into tiles on a grid of its plane, each one a patch of its own: a growing floor re-textures
+// the tile that grows, not the whole building.
+#include <array>
 #include <cstddef>
 #include <deque>
 #include <filesystem>
+#include <map>
 #include <optional>
 #include <set>
 #include <utility>
@@ -39,6 +43,10 @@ struct PatchMapConfig {
   // a file (PatchMap::setSampleSpillDir), and loads them back if it is seen again; 0 keeps
   // them. Its texture was made from them at finalization: memory stays bounded on long runs.
   int release_samples_after_frames = 90;
+  // A plane that outgrows tile_m along its u or v axis is cut into tile_m x tile_m tiles, each
+  // a patch with its own id, samples, texture and versions, sharing the plane. Surfaces up to
+  // tile_m are never cut. 0 never cuts.
+  double tile_m = 6.0;
   // Colour samples: each sample_cell_m square of the plane blends the samples that fall in it.
   double sample_cell_m = 0.0035;
   // Colours are taken from every N-th frame (and from frames far from the last one sampled):
@@ -75,16 +83,28 @@ std::vector<PlaneObservation> observationsOf(const core::Frame& frame,
                                              const PlaneDetection& detection,
                                              const core::Isometry& T_W_C);
 
+// How a plane is cut into tiles: per axis (u, v), the cell index where tile 0 starts, set
+// once the plane outgrew one tile; before that one tile holds the whole plane on that axis.
+struct TileGrid {
+  int tile_cells = 0;  // tile side in cells; 0: never cut
+  std::array<std::optional<int>, 2> anchor;
+  Cell keyOf(const Cell& cell) const;
+  bool cut() const { return anchor[0].has_value() || anchor[1].has_value(); }
+};
+
+// One tile of a plane (the whole plane, if it is not cut).
 struct Patch {
   int id = 0;
+  int plane = 0;     // the id of the plane's first tile; every tile of a plane shares it
+  Cell tile{0, 0};   // the tile's key in its plane's TileGrid
   Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();  // n . X = offset
   double offset = 0.0;
-  // In-plane frame fixed when the patch is created: cells are indexed in (u, v) from origin.
+  // The plane, shared by its tiles. In-plane frame fixed when the plane is created: cells are
+  // indexed in (u, v) from origin.
   Eigen::Vector3d origin = Eigen::Vector3d::Zero();
   Eigen::Vector3d u_axis = Eigen::Vector3d::UnitX();
   Eigen::Vector3d v_axis = Eigen::Vector3d::UnitY();
   CellSet cells;
-  PointMoments moments;  // of every point ever added, for the least-squares refit
   ColourSamples samples{PatchMapConfig{}.sample_cell_m};  // PatchMap sets its configured cell
   // Sum over every coloured pixel of its footprint on the plane (distance / fx, metres), for
   // the texel size that matches how sharply the sensor saw the patch.
@@ -178,7 +198,7 @@ class PatchMap {
   PatchSnapshot snapshot(const Patch& patch) const;
   const PatchMapConfig& config() const { return config_; }
   // Whether a region (its least-squares plane and points, world frame) continues `patch`:
-  // normal and centroid within the bounds, touching its cells.
+  // normal and centroid within the bounds, touching its cells (the tile's).
   bool continues(const Patch& patch, const PlaneFit& region,
                  const std::vector<Eigen::Vector3d>& points) const;
   std::size_t liveCount() const;       // not finalized in their current state
@@ -190,16 +210,36 @@ class PatchMap {
   double areaM2(const Patch& patch) const;
 
  private:
-  void absorb(Patch& into, const Patch& other) const;
-  void addObservation(Patch& patch, const std::vector<Eigen::Vector3d>& points,
-                      const PointMoments& moments) const;
-  static void refit(Patch& patch);
+  // What a plane keeps beside its tiles.
+  struct PlaneState {
+    PointMoments moments;  // of every point ever added, for the least-squares refit
+    TileGrid grid;
+    Cell lo{0, 0}, hi{0, 0};  // bounds of every cell of every tile (once has_cells)
+    bool has_cells = false;
+  };
+
+  // Adds a region's points to plane `plane_id`, cutting new tiles as they are needed; returns
+  // the id of the tile that got most of them.
+  int placePoints(int plane_id, const std::vector<Eigen::Vector3d>& points,
+                  const PointMoments& moments);
+  // Moves every tile of plane `from_id` (cells, samples) into plane `into_id`'s tiles; the
+  // tiles moved are gone, and ids handed out for them become the tiles that took them.
+  void mergePlane(int into_id, int from_id, std::vector<int>& ids);
+  // Puts cells (in the plane's frame) into their tiles, which are created as needed and count
+  // as seen this frame; returns the id of the tile that took most of them.
+  int placeCells(int plane_id, const std::vector<Cell>& cells);
+  // Sets a grid anchor on each axis along which the plane, with `cells`, outgrows one tile.
+  void extendGrid(PlaneState& plane, const std::vector<Cell>& cells) const;
+  Patch& tileAt(int plane_id, const Cell& key);
+  Patch& patchWithId(int id);
+  void refitPlane(int plane_id);
   void finalize(Patch& patch, std::vector<PatchEvent>& events) const;
   // Loads a released patch's samples back (a region continues it).
   void restoreSamples(Patch& patch) const;
 
   PatchMapConfig config_;
   std::vector<Patch> patches_;
+  std::map<int, PlaneState> planes_;  // by plane id
   std::set<int> seen_this_frame_;
   std::vector<PatchEvent> pending_;  // retirements from merges, reported by endFrame
   Eigen::Vector3f last_gain_ = Eigen::Vector3f::Ones();

@@ -1,0 +1,107 @@
+// PatchMap's patch lifecycle: finalization when a patch stops growing or leaves the view, and
+// colour samples moved out of memory while a finalized patch is out of view.
+#include <filesystem>
+
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+
+#include "tessera/core/error.h"
+#include "tessera/planes/patch_map.h"
+
+namespace tessera::planes {
+
+void PatchMap::finalize(Patch& patch, std::vector<PatchEvent>& events) const {
+  patch.version += 1;
+  patch.finalized = true;
+  patch.finalized_area_m2 = areaM2(patch);
+  events.push_back(
+      {PatchEvent::Kind::kFinalized, patch.id, patch.version, patch.finalized_area_m2});
+}
+
+std::vector<PatchEvent> PatchMap::endFrame(long frame_index) {
+  std::vector<PatchEvent> events = std::move(pending_);
+  pending_.clear();
+  for (Patch& patch : patches_) {
+    const double area = areaM2(patch);
+    if (seen_this_frame_.count(patch.id) == 0) {
+      const bool gone_long = frame_index - patch.last_seen_frame >= config_.out_of_view_frames;
+      if (!patch.finalized && gone_long && area >= config_.min_area_m2) finalize(patch, events);
+      continue;
+    }
+    patch.last_seen_frame = frame_index;
+    patch.frames_seen += 1;
+    patch.area_in_view.push_back(area);
+    while (patch.area_in_view.size() > static_cast<std::size_t>(config_.stable_frames) + 1) {
+      patch.area_in_view.pop_front();
+    }
+    if (patch.finalized && area > patch.finalized_area_m2 * (1.0 + config_.max_growth)) {
+      patch.finalized = false;  // it grows again: a new version will follow
+    }
+    const bool stable =
+        patch.area_in_view.size() > static_cast<std::size_t>(config_.stable_frames) &&
+        area <= patch.area_in_view.front() * (1.0 + config_.max_growth);
+    if (!patch.finalized && stable && area >= config_.min_area_m2) finalize(patch, events);
+  }
+  seen_this_frame_.clear();
+  return events;
+}
+
+void PatchMap::setSampleSpillDir(std::filesystem::path dir) {
+  std::error_code ec;
+  std::filesystem::create_directories(dir, ec);
+  if (ec) {
+    spdlog::warn("{}: cannot create it ({}); colour samples stay in memory", dir.string(),
+                 ec.message());
+    return;
+  }
+  spill_dir_ = std::move(dir);
+}
+
+std::size_t PatchMap::releaseIdleSamples(long frame_index) {
+  if (!spill_dir_ || config_.release_samples_after_frames <= 0 || spill_failed_) return 0;
+  std::size_t released = 0;
+  for (Patch& patch : patches_) {
+    if (!patch.finalized || patch.spilled_samples || patch.samples.size() == 0 ||
+        frame_index - patch.last_seen_frame < config_.release_samples_after_frames) {
+      continue;
+    }
+    const std::filesystem::path path = *spill_dir_ / fmt::format("patch_{}.samples", patch.id);
+    try {
+      patch.samples.save(path);
+    } catch (const core::Error& e) {
+      spdlog::warn("{}; colour samples stay in memory from now on", e.what());
+      spill_failed_ = true;
+      std::error_code ec;
+      std::filesystem::remove(path, ec);
+      break;
+    }
+    patch.samples = ColourSamples(config_.sample_cell_m);
+    patch.spilled_samples = path;
+    ++released;
+  }
+  samples_released_ += released;
+  return released;
+}
+
+void PatchMap::restoreSamples(Patch& patch) const {
+  if (!patch.spilled_samples) return;
+  try {
+    patch.samples = ColourSamples::load(*patch.spilled_samples);
+  } catch (const core::Error& e) {  // the patch goes on with the samples it gets from now
+    spdlog::error("patch {}: {}; its earlier colours are lost", patch.id, e.what());
+  }
+  std::error_code ec;
+  std::filesystem::remove(*patch.spilled_samples, ec);
+  patch.spilled_samples.reset();
+}
+
+std::vector<PatchEvent> PatchMap::finalizeAll() {
+  std::vector<PatchEvent> events = std::move(pending_);
+  pending_.clear();
+  for (Patch& patch : patches_) {
+    if (!patch.finalized && areaM2(patch) >= config_.min_area_m2) finalize(patch, events);
+  }
+  return events;
+}
+
+}  // namespace tessera::planes
