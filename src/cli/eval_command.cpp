@@ -35,6 +35,10 @@ CLI::App* addEvalCommand(CLI::App& app, EvalArguments& args) {
                    "View PSNR: render patches.obj and mesh.ply at the run's poses into the frames "
                    "of this source (the one the run read, with the same --depth-scale and "
                    "--intrinsics) and compare over the same pixels");
+  eval->add_option("--map", args.map_file,
+                   "With --frames: the map file in RUN_DIR rendered as the patches: patches.obj, "
+                   "map.obj or map.glb (read with tinygltf)")
+      ->capture_default_str();
   eval->add_option("--save", args.save_dir,
                    "With --frames: write render | captured | difference PNGs of a few views here");
   eval->add_option("--max-views", args.max_views,
@@ -66,6 +70,7 @@ int evalCommand(const EvalArguments& args) {
       options.max_views = args.max_views;
       options.edge_margin_px = args.edge_margin_px;
       options.save_dir = args.save_dir;
+      options.map_file = args.map_file;
       printFigures(eval::evaluateRunViews(args.run_dir, *source, options));
     }
     // Needs no ground truth: written for every run evaluated.

@@ -14,6 +14,7 @@ struct EvalArguments {
   std::string ground_truth;
   std::string frames;  // --frames: the source whose captured frames the map is rendered into
   std::string save_dir;
+  std::string map_file = "patches.obj";  // --map
   int max_views = 20;
   int edge_margin_px = eval::ViewEvaluationOptions{}.edge_margin_px;
   SourceArguments source_args;

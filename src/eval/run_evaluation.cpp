@@ -213,7 +213,7 @@ nlohmann::json evaluateRunViews(const std::filesystem::path& run_dir, core::Fram
       every != report.end() && every->is_number_integer()) {
     options.holdout_every = every->get<int>();
   }
-  const RenderMesh patches = readTexturedObj(run_dir / "patches.obj");
+  const RenderMesh patches = readTexturedMap(run_dir / options.map_file);
   const RenderMesh mesh = readColouredPly(run_dir / "mesh.ply");
   const Trajectory poses = readTumTrajectory(run_dir / "trajectory.txt");
   const ViewEvaluation views =
@@ -226,6 +226,7 @@ nlohmann::json evaluateRunViews(const std::filesystem::path& run_dir, core::Fram
   }
   nlohmann::json figures = viewFigures(views);
   figures["view_frames_source"] = frames.name();
+  figures["view_map"] = options.map_file.string();
   mergeIntoReport(report_path, report, figures);
   return figures;
 }

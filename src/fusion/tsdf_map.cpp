@@ -1,6 +1,7 @@
 #include "tessera/fusion/tsdf_map.h"
 
 #include <fstream>
+#include <optional>
 
 #include <cstring>
 
@@ -150,23 +151,28 @@ std::size_t TsdfMap::releaseBlocksBehind(const core::Isometry& T_W_C, double dis
   // few percent of their voxels' bytes). Marching cubes needs the next block's voxels for the
   // cubes on a block's far faces, so a one-voxel seam stays open where released blocks meet
   // blocks released later or still live.
-  o3d::pipelines::integration::ScalableTSDFVolume released(
-      config_.voxel_size_m, config_.truncation_m,
-      o3d::pipelines::integration::TSDFVolumeColorType::RGB8, config_.block_resolution);
+  // Made when the first block goes (most frames release none).
+  std::optional<o3d::pipelines::integration::ScalableTSDFVolume> released;
   for (auto it = units.begin(); it != units.end();) {
     // Open3D keys a block by its integer index; it spans [index, index + 1) * block edge.
     const Eigen::Vector3d centre_W =
         (it->first.cast<double>() + Eigen::Vector3d::Constant(0.5)) * block_m;
     const Eigen::Vector3d centre_C = T_C_W * centre_W;
     if (centre_C.z() < 0.0 && centre_C.norm() > distance_m) {
-      released.volume_units_.emplace(it->first, std::move(it->second));
+      if (!released) {
+        released.emplace(config_.voxel_size_m, config_.truncation_m,
+                         o3d::pipelines::integration::TSDFVolumeColorType::RGB8,
+                         config_.block_resolution);
+      }
+      released->volume_units_.emplace(it->first, std::move(it->second));
       it = units.erase(it);
     } else {
       ++it;
     }
   }
-  if (!released.volume_units_.empty()) append(*released.ExtractTriangleMesh(), released_surface_);
-  return released.volume_units_.size();
+  if (!released) return 0;
+  append(*released->ExtractTriangleMesh(), released_surface_);
+  return released->volume_units_.size();
 }
 
 std::size_t TsdfMap::blockCount() const { return volume_->tsdf.volume_units_.size(); }

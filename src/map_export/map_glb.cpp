@@ -128,7 +128,6 @@ void writeMapGlb(const MapModel& map, const std::filesystem::path& images_dir,
   model.asset.generator = "tessera";
   BufferWriter buffer(model);
   addMaterials(map, images_dir, model, buffer);
-  int vertex_colour_material = -1;
   tinygltf::Scene scene;
   for (const MapObject& object : map.objects) {
     std::vector<float> positions;
@@ -156,20 +155,7 @@ void writeMapGlb(const MapModel& map, const std::filesystem::path& images_dir,
       primitive.attributes["COLOR_0"] = buffer.accessor(colours, 3, TINYGLTF_TYPE_VEC3);
     }
     primitive.indices = buffer.indices(object.triangles);
-    if (object.material) {
-      primitive.material = static_cast<int>(*object.material);
-    } else {
-      if (vertex_colour_material < 0) {  // white, so the vertex colours show as they are
-        tinygltf::Material plain;
-        plain.name = "vertex_colours";
-        plain.doubleSided = true;
-        plain.pbrMetallicRoughness.metallicFactor = 0.0;
-        plain.pbrMetallicRoughness.roughnessFactor = 1.0;
-        model.materials.push_back(plain);
-        vertex_colour_material = static_cast<int>(model.materials.size()) - 1;
-      }
-      primitive.material = vertex_colour_material;
-    }
+    if (object.material) primitive.material = static_cast<int>(*object.material);
     tinygltf::Mesh mesh;
     mesh.name = object.name;
     mesh.primitives.push_back(primitive);

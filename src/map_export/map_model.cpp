@@ -28,10 +28,6 @@ MapMaterial materialOf(const planes::MapTexture& shown) {
   return {fmt::format("texture_{}", shown.texture_id), shown.image, shown.tiled, {1.0, 1.0, 1.0}};
 }
 
-Eigen::Vector3d toWorld(const planes::Patch::Frame& frame, const Eigen::Vector2d& uv) {
-  return frame.origin + uv.x() * frame.u_axis + uv.y() * frame.v_axis;
-}
-
 // The patch's outline, triangulated with its holes; texture coordinates from its binding.
 MapObject patchObject(const planes::PatchMap& map, const planes::Patch& patch,
                       const planes::TextureBinding* texture, MaterialTable& materials) {
@@ -50,7 +46,7 @@ MapObject patchObject(const planes::PatchMap& map, const planes::Patch& patch,
     const PlanarTriangles planar = triangulatePolygon(part);
     const auto first = static_cast<std::uint32_t>(object.positions.size());
     for (const Eigen::Vector2d& uv : planar.vertices) {
-      object.positions.push_back(toWorld(frame, uv));
+      object.positions.push_back(frame.at(uv.x(), uv.y()));
       // Unclamped: the texture coordinates are affine in (u, v), so a triangle with a corner
       // beyond the image still maps every point right (the sampler clamps).
       object.uvs.push_back(texture != nullptr
@@ -75,7 +71,8 @@ MapObject overlayObject(const planes::Patch& patch, const planes::TextureBinding
   const planes::OverlayQuad quad = planes::overlayQuad(texture, overlay);
   const planes::Patch::Frame frame = patch.planeFrame();
   for (std::size_t i = 0; i < 4; ++i) {
-    object.positions.push_back(toWorld(frame, quad.uv[i]) - planes::kOverlayLift_m * patch.normal);
+    object.positions.push_back(frame.at(quad.uv[i].x(), quad.uv[i].y()) -
+                               planes::kOverlayLift_m * patch.normal);
     object.uvs.push_back(quad.st[i]);
   }
   object.triangles = {{0, 1, 2}, {0, 2, 3}};
@@ -125,12 +122,6 @@ MapObject residualObject(const planes::PatchMap& map, const fusion::SurfaceMesh&
   return object;
 }
 
-const planes::TextureBinding* bindingOf(const planes::Patch& patch,
-                                        const planes::TextureBindings& textures) {
-  const auto it = textures.find(patch.id);
-  return it != textures.end() && it->second.version == patch.version ? &it->second : nullptr;
-}
-
 }  // namespace
 
 std::size_t MapModel::triangleCount() const {
@@ -145,7 +136,7 @@ MapModel buildMapModel(const planes::PatchMap& map, const planes::TextureBinding
   MaterialTable materials(model.materials);
   for (const planes::Patch& patch : map.patches()) {
     if (!patch.finalized) continue;
-    const planes::TextureBinding* texture = bindingOf(patch, textures);
+    const planes::TextureBinding* texture = planes::currentTexture(patch, textures);
     MapObject object = patchObject(map, patch, texture, materials);
     if (object.triangles.empty()) continue;
     model.objects.push_back(std::move(object));
@@ -157,7 +148,12 @@ MapModel buildMapModel(const planes::PatchMap& map, const planes::TextureBinding
   }
   if (residual != nullptr) {
     MapObject object = residualObject(map, *residual, options);
-    if (!object.triangles.empty()) model.objects.push_back(std::move(object));
+    if (!object.triangles.empty()) {
+      // A material of its own: in an OBJ a face without `usemtl` would take the one before
+      // it. White, so that the vertex colours show as they are.
+      object.material = materials.indexOf({"vertex_colours", "", false, {1.0, 1.0, 1.0}});
+      model.objects.push_back(std::move(object));
+    }
   }
   return model;
 }

@@ -3,26 +3,15 @@
 
 #include <fmt/format.h>
 
-#include "tessera/core/error.h"
+#include "tessera/core/output_file.h"
 #include "tessera/map_export/map_files.h"
 
 namespace tessera::map_export {
 
 namespace {
 
-std::ofstream openForWriting(const std::filesystem::path& path) {
-  std::ofstream out(path);
-  if (!out) throw core::Error(fmt::format("{}: cannot be created", path.string()));
-  return out;
-}
-
-void finishWriting(std::ofstream& out, const std::filesystem::path& path) {
-  out.close();
-  if (!out) throw core::Error(fmt::format("{}: could not write (disk full?)", path.string()));
-}
-
 void writeMtl(const MapModel& model, const std::filesystem::path& path) {
-  std::ofstream out = openForWriting(path);
+  std::ofstream out = core::createOutputFile(path);
   out << "# tessera map materials: one per texture image\n";
   for (const MapMaterial& material : model.materials) {
     out << fmt::format("newmtl {}\nKa 1 1 1\nKd {:.3f} {:.3f} {:.3f}\nKs 0 0 0\nillum 1\n",
@@ -35,7 +24,7 @@ void writeMtl(const MapModel& model, const std::filesystem::path& path) {
     }
     out << '\n';
   }
-  finishWriting(out, path);
+  core::finishOutputFile(out, path);
 }
 
 }  // namespace
@@ -44,7 +33,7 @@ void writeMapObj(const MapModel& model, const std::filesystem::path& obj_path) {
   std::filesystem::path mtl_path = obj_path;
   mtl_path.replace_extension(".mtl");
   writeMtl(model, mtl_path);
-  std::ofstream out = openForWriting(obj_path);
+  std::ofstream out = core::createOutputFile(obj_path);
   out << "# tessera map: planar patches textured from the texture database, overlays, and the "
          "non-planar residual\n";
   out << "mtllib " << mtl_path.filename().string() << '\n';
@@ -79,7 +68,7 @@ void writeMapObj(const MapModel& model, const std::filesystem::path& obj_path) {
     positions += object.positions.size();
     uvs += object.uvs.size();
   }
-  finishWriting(out, obj_path);
+  core::finishOutputFile(out, obj_path);
 }
 
 }  // namespace tessera::map_export

@@ -9,25 +9,11 @@
 #include <nlohmann/json.hpp>
 
 #include "tessera/core/error.h"
+#include "tessera/core/output_file.h"
 
 namespace tessera::planes {
 
 namespace {
-
-void checkWritten(std::ofstream& out, const std::filesystem::path& path) {
-  out.close();
-  if (!out) throw core::Error(fmt::format("{}: could not be written (disk full?)", path.string()));
-}
-
-std::ofstream openForWriting(const std::filesystem::path& path) {
-  std::ofstream out(path);
-  if (!out) throw core::Error(fmt::format("{}: cannot be created", path.string()));
-  return out;
-}
-
-Eigen::Vector3d toWorld(const Patch::Frame& frame, double u, double v) {
-  return frame.origin + u * frame.u_axis + v * frame.v_axis;
-}
 
 nlohmann::json polygonJson(const Polygon2& polygon) {
   nlohmann::json points = nlohmann::json::array();
@@ -38,13 +24,12 @@ nlohmann::json polygonJson(const Polygon2& polygon) {
 nlohmann::json vectorJson(const Eigen::Vector3d& v) { return {v.x(), v.y(), v.z()}; }
 nlohmann::json vectorJson(const Eigen::Vector2d& v) { return {v.x(), v.y()}; }
 
-// The texture of the patch's current version, if there is one.
-const TextureBinding* textureOf(const Patch& patch, const TextureBindings& textures) {
+}  // namespace
+
+const TextureBinding* currentTexture(const Patch& patch, const TextureBindings& textures) {
   const auto it = textures.find(patch.id);
   return it != textures.end() && it->second.version == patch.version ? &it->second : nullptr;
 }
-
-}  // namespace
 
 Eigen::Vector2d textureCoordinates(const TextureBinding& texture, double u, double v, bool clamp) {
   const Eigen::Vector2d d = Eigen::Vector2d(u, v) - texture.origin_uv;
@@ -103,7 +88,7 @@ std::size_t writeOverlay(std::ofstream& out, const Patch& patch, const Patch::Fr
                      layer, overlay.texture_id);
   for (std::size_t i = 0; i < 4; ++i) {
     const Eigen::Vector3d X =
-        toWorld(frame, quad.uv[i].x(), quad.uv[i].y()) - kOverlayLift_m * patch.normal;
+        frame.at(quad.uv[i].x(), quad.uv[i].y()) - kOverlayLift_m * patch.normal;
     out << fmt::format("v {:.4f} {:.4f} {:.4f}\nvt {:.5f} {:.5f}\n", X.x(), X.y(), X.z(),
                        quad.st[i].x(), quad.st[i].y());
   }
@@ -119,14 +104,14 @@ std::string materialOf(const Patch& patch, const TextureBinding& texture) {
 
 void writeMaterials(const PatchMap& map, const TextureBindings& textures,
                     const std::filesystem::path& path) {
-  std::ofstream out = openForWriting(path);
+  std::ofstream out = core::createOutputFile(path);
   out << "# tessera patch textures\n";
   // Patches without a bitmap use this plain material: an OBJ's material carries over from one
   // object to the next, so each patch names its own.
   out << "newmtl untextured\nKa 1 1 1\nKd 0.7 0.7 0.7\nKs 0 0 0\nillum 1\n\n";
   std::set<std::int64_t> written;
   for (const Patch& patch : map.patches()) {
-    const TextureBinding* texture = patch.finalized ? textureOf(patch, textures) : nullptr;
+    const TextureBinding* texture = patch.finalized ? currentTexture(patch, textures) : nullptr;
     if (texture == nullptr) continue;
     if (texture->map_texture) {
       std::vector<const MapTexture*> layers{&*texture->map_texture};
@@ -147,7 +132,7 @@ void writeMaterials(const PatchMap& map, const TextureBindings& textures,
         "map_d -clamp on {}\n\n",
         patch.id, texture->image, texture->image);
   }
-  checkWritten(out, path);
+  core::finishOutputFile(out, path);
 }
 
 }  // namespace
@@ -157,7 +142,7 @@ void writePatchesObj(const PatchMap& map, const std::filesystem::path& path,
   std::filesystem::path materials = path;
   materials.replace_extension(".mtl");
   writeMaterials(map, textures, materials);
-  std::ofstream out = openForWriting(path);
+  std::ofstream out = core::createOutputFile(path);
   out << "# tessera finalized planar patches\n";
   out << "mtllib " << materials.filename().string() << '\n';
   const double cell = map.config().cell_m;
@@ -166,13 +151,13 @@ void writePatchesObj(const PatchMap& map, const std::filesystem::path& path,
     if (!patch.finalized) continue;
     const Outline outline = map.outlineOf(patch);
     const Patch::Frame frame = patch.planeFrame();
-    const TextureBinding* texture = textureOf(patch, textures);
+    const TextureBinding* texture = currentTexture(patch, textures);
     out << fmt::format("o patch_{}_v{}\n", patch.id, patch.version);
     out << "usemtl " << (texture != nullptr ? materialOf(patch, *texture) : "untextured") << '\n';
     // Every vertex gets a texture coordinate (0, 0 on untextured patches), so that vertex and
     // texture-coordinate indices stay equal through the file.
     auto vertex = [&](double u, double v) {
-      const Eigen::Vector3d X = toWorld(frame, u, v);
+      const Eigen::Vector3d X = frame.at(u, v);
       const Eigen::Vector2d st =
           texture != nullptr ? textureCoordinates(*texture, u, v) : Eigen::Vector2d::Zero();
       out << fmt::format("v {:.4f} {:.4f} {:.4f}\nvt {:.5f} {:.5f}\n", X.x(), X.y(), X.z(), st.x(),
@@ -214,7 +199,7 @@ void writePatchesObj(const PatchMap& map, const std::filesystem::path& path,
       vertices = writeOverlay(out, patch, frame, *texture, texture->overlays[k], k + 1, vertices);
     }
   }
-  checkWritten(out, path);
+  core::finishOutputFile(out, path);
 }
 
 void writePatchesJson(const PatchMap& map, const std::filesystem::path& path,
@@ -231,7 +216,7 @@ void writePatchesJson(const PatchMap& map, const std::filesystem::path& path,
       parts.push_back({{"outer", polygonJson(part.outer)}, {"holes", holes}});
     }
     nlohmann::json texture_json = nullptr;
-    if (const TextureBinding* texture = textureOf(patch, textures)) {
+    if (const TextureBinding* texture = currentTexture(patch, textures)) {
       texture_json = {{"image", texture->image},
                       {"state_image", texture->state_image},
                       {"texel_m", texture->texel_m},
@@ -244,7 +229,7 @@ void writePatchesJson(const PatchMap& map, const std::filesystem::path& path,
                       {"inpainted", texture->inpainted}};
     }
     nlohmann::json instance_json = nullptr;
-    if (const TextureBinding* texture = textureOf(patch, textures);
+    if (const TextureBinding* texture = currentTexture(patch, textures);
         texture != nullptr && texture->map_texture) {
       const MapTexture& shown = *texture->map_texture;
       const core::Similarity2& s = shown.transform;
@@ -287,13 +272,13 @@ void writePatchesJson(const PatchMap& map, const std::filesystem::path& path,
                        {"texture", texture_json},
                        {"instance", instance_json}});
   }
-  std::ofstream out = openForWriting(path);
+  std::ofstream out = core::createOutputFile(path);
   out << nlohmann::json{{"format", "tessera patches 1"},
                         {"cell_m", map.config().cell_m},
                         {"patches", patches}}
              .dump(1)
       << '\n';
-  checkWritten(out, path);
+  core::finishOutputFile(out, path);
 }
 
 }  // namespace tessera::planes

@@ -1,4 +1,5 @@
 #include <algorithm>
+#include <cmath>
 #include <filesystem>
 #include <limits>
 #include <map>
@@ -9,6 +10,7 @@
 #include <gtest/gtest.h>
 
 #include "support/synthetic_plane.h"
+#include "support/test_data.h"
 #include "tessera/planes/patch_map.h"
 
 namespace tessera::planes {
@@ -350,22 +352,34 @@ TEST(PatchColours, SamplesFromAFrameMatchTheColourOnThePlane) {
   EXPECT_GT(static_cast<double>(matching), 0.97 * static_cast<double>(samples.size()));
 }
 
+// One rendered plane, coloured once, in a map whose released samples go to a fresh folder.
+struct ColouredPlane {
+  core::Frame frame;
+  PlaneDetection detection;
+  std::vector<int> ids;
+};
+
+ColouredPlane addColouredPlane(PatchMap& map, const std::filesystem::path& spill) {
+  const Eigen::Vector3d n = Eigen::Vector3d(0.1, -0.2, -1.0).normalized();
+  const core::Isometry T_W_C = core::Isometry::Identity();
+  ColouredPlane plane;
+  plane.frame =
+      test::renderPlane(test::kinectIntrinsics(), T_W_C, n, n.dot(Eigen::Vector3d(0, 0, 1.5)));
+  plane.detection = PlaneDetector(PlaneDetectorConfig{}).detect(plane.frame);
+  map.setSampleSpillDir(spill);
+  plane.ids = map.add(observationsOf(plane.frame, plane.detection, T_W_C));
+  map.addColours(plane.frame, plane.detection, T_W_C, plane.ids);
+  return plane;
+}
+
 // Bounded memory: a finalized patch out of view for release_samples_after_frames frames moves
 // its samples to a file; seen again, it gets them back exactly, and the file is gone.
 TEST(PatchLifecycle, AFinalizedPatchOutOfViewReleasesItsSamplesAndGetsThemBackWhenSeen) {
-  const Eigen::Vector3d n = Eigen::Vector3d(0.1, -0.2, -1.0).normalized();
-  const core::Isometry T_W_C = core::Isometry::Identity();
-  const core::Frame frame =
-      test::renderPlane(test::kinectIntrinsics(), T_W_C, n, n.dot(Eigen::Vector3d(0, 0, 1.5)));
-  const PlaneDetection detection = PlaneDetector(PlaneDetectorConfig{}).detect(frame);
   PatchMapConfig config = lifecycleConfig();
   config.release_samples_after_frames = 20;
   PatchMap map(config);
-  const auto spill = std::filesystem::temp_directory_path() / "tessera_tests" / "sample_spill";
-  std::filesystem::remove_all(spill);
-  map.setSampleSpillDir(spill);
-  const auto ids = map.add(observationsOf(frame, detection, T_W_C));
-  map.addColours(frame, detection, T_W_C, ids);
+  const auto spill = test::freshTempDir() / "samples";
+  const ColouredPlane plane = addColouredPlane(map, spill);
   ASSERT_EQ(map.patches().size(), 1u);
   const std::vector<ColourSample> before = map.patches().front().samples.all();
   ASSERT_GT(before.size(), 100000u);
@@ -383,7 +397,7 @@ TEST(PatchLifecycle, AFinalizedPatchOutOfViewReleasesItsSamplesAndGetsThemBackWh
   EXPECT_TRUE(std::filesystem::is_regular_file(*released.spilled_samples));
   EXPECT_EQ(map.releaseIdleSamples(40), 0u);  // released once
 
-  map.add(observationsOf(frame, detection, T_W_C));  // seen again
+  map.add(observationsOf(plane.frame, plane.detection, core::Isometry::Identity()));  // again
   const Patch& back = map.patches().front();
   EXPECT_FALSE(back.spilled_samples);
   const std::vector<ColourSample> after = back.samples.all();
@@ -400,21 +414,14 @@ TEST(PatchLifecycle, AFinalizedPatchOutOfViewReleasesItsSamplesAndGetsThemBackWh
 
 // A spill folder that cannot take the file keeps the samples in memory.
 TEST(PatchLifecycle, SamplesStayInMemoryWhenTheirFileCannotBeWritten) {
-  const Eigen::Vector3d n(0, 0, -1);
-  const core::Isometry T_W_C = core::Isometry::Identity();
-  const core::Frame frame = test::renderPlane(test::kinectIntrinsics(), T_W_C, n, -1.5);
-  const PlaneDetection detection = PlaneDetector(PlaneDetectorConfig{}).detect(frame);
   PatchMapConfig config = lifecycleConfig();
   config.release_samples_after_frames = 5;
   PatchMap map(config);
-  const auto spill = std::filesystem::temp_directory_path() / "tessera_tests" / "sample_spill_ro";
-  std::filesystem::remove_all(spill);
-  map.setSampleSpillDir(spill);
+  const auto spill = test::freshTempDir() / "samples";
+  const ColouredPlane plane = addColouredPlane(map, spill);
   // A folder where the file should go: the file cannot be created.
-  const auto ids = map.add(observationsOf(frame, detection, T_W_C));
-  map.addColours(frame, detection, T_W_C, ids);
   std::filesystem::create_directories(spill /
-                                      ("patch_" + std::to_string(ids.front()) + ".samples"));
+                                      ("patch_" + std::to_string(plane.ids.front()) + ".samples"));
   for (long f = 0; f <= 15; ++f) map.endFrame(f);
   ASSERT_TRUE(map.patches().front().finalized);
   EXPECT_EQ(map.releaseIdleSamples(30), 0u);
@@ -503,6 +510,73 @@ TEST(PatchTiles, ColoursGoToTheTileWhereThePixelMeetsThePlane) {
   }
   const double expected = static_cast<double>(whole.patches().front().samples.size());
   EXPECT_NEAR(static_cast<double>(samples), expected, 0.01 * expected);
+}
+
+// The test-sized version of the long-run bench: a camera drives 20 m along a floor, 10 cm a
+// frame. With tiles the colour samples in memory stay bounded (finalized tiles behind the
+// camera release theirs); one uncut plane holds the whole floor's.
+struct DriveMemory {
+  std::size_t peak_first_half = 0, peak_second_half = 0, at_end = 0;
+  std::size_t patches = 0, released = 0;
+  double largest_finalized_m2 = 0.0;
+};
+
+DriveMemory driveAlongAFloor(PatchMapConfig config, const std::filesystem::path& spill) {
+  constexpr int kFrames = 200;
+  PatchMap map(config);
+  map.setSampleSpillDir(spill);
+  const PlaneDetector detector{PlaneDetectorConfig{}};
+  const double c = std::cos(M_PI / 4.0), s = std::sin(M_PI / 4.0);
+  DriveMemory memory;
+  for (long frame = 0; frame < kFrames; ++frame) {
+    // 1 m above the floor, looking along +x and 45 degrees down.
+    core::Isometry T_W_C = core::Isometry::Identity();
+    T_W_C.linear().col(0) = Eigen::Vector3d(0.0, -1.0, 0.0);
+    T_W_C.linear().col(1) = Eigen::Vector3d(-s, 0.0, -c);
+    T_W_C.linear().col(2) = Eigen::Vector3d(c, 0.0, -s);
+    T_W_C.translation() = Eigen::Vector3d(0.1 * static_cast<double>(frame), 0.0, 1.0);
+    const core::Frame image =
+        test::renderPlane(test::kinectIntrinsics(), T_W_C, Eigen::Vector3d::UnitZ(), 0.0);
+    const PlaneDetection detection = detector.detect(image);
+    const auto ids = map.add(observationsOf(image, detection, T_W_C));
+    if (frame % 2 == 0) map.addColours(image, detection, T_W_C, ids);
+    for (const PatchEvent& e : map.endFrame(frame)) {
+      if (e.kind == PatchEvent::Kind::kFinalized) {
+        memory.largest_finalized_m2 = std::max(memory.largest_finalized_m2, e.area_m2);
+      }
+    }
+    map.releaseIdleSamples(frame);
+    std::size_t bytes = 0;
+    for (const Patch& patch : map.patches()) bytes += patch.samples.bytes();
+    std::size_t& peak = frame < kFrames / 2 ? memory.peak_first_half : memory.peak_second_half;
+    peak = std::max(peak, bytes);
+    memory.at_end = bytes;
+  }
+  memory.patches = map.patches().size();
+  memory.released = map.samplesReleased();
+  return memory;
+}
+
+TEST(PatchTiles, ALongDriveKeepsTheColourSamplesInMemoryBounded) {
+  PatchMapConfig config = lifecycleConfig();
+  config.release_samples_after_frames = 20;
+  config.tile_m = 2.0;
+  const DriveMemory tiled = driveAlongAFloor(config, test::freshTempDir() / "tiled");
+  config.tile_m = 0.0;
+  const DriveMemory uncut = driveAlongAFloor(config, test::freshTempDir() / "uncut");
+
+  EXPECT_GE(tiled.patches, 10u);  // about 22 m of floor seen, in 2 m tiles
+  EXPECT_GE(tiled.released, 4u);
+  EXPECT_LE(tiled.largest_finalized_m2, 2.0 * 2.0 + 1e-9);
+  // No growth: the second half of the drive holds no more than the first half did.
+  EXPECT_LE(static_cast<double>(tiled.peak_second_half),
+            1.2 * static_cast<double>(tiled.peak_first_half))
+      << tiled.peak_first_half << " bytes, then " << tiled.peak_second_half;
+  // The uncut floor is one patch in view all along, never stable: it keeps every sample.
+  EXPECT_EQ(uncut.patches, 1u);
+  EXPECT_EQ(uncut.released, 0u);
+  EXPECT_GT(static_cast<double>(uncut.at_end), 2.5 * static_cast<double>(tiled.peak_second_half))
+      << uncut.at_end << " bytes uncut, " << tiled.peak_second_half << " tiled";
 }
 
 }  // namespace

@@ -41,6 +41,9 @@ struct ViewEvaluationOptions {
   int edge_margin_px = 2;
   std::size_t min_pixels = 500;    // views with fewer common pixels are not scored
   std::filesystem::path save_dir;  // non-empty: render | captured | difference PNGs
+  // The map rendered as "patches", relative to the run folder: patches.obj, map.obj or
+  // map.glb (tessera eval --map).
+  std::filesystem::path map_file = "patches.obj";
   int save_views = 4;
 };
 

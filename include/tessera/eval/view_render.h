@@ -1,6 +1,6 @@
 #pragma once
 // A small CPU rasteriser for the view evaluation (docs/METRICS.md, view PSNR): renders a
-// textured map (patches.obj with its RGBA bitmaps) or a vertex-coloured mesh (mesh.ply) from a
+// textured map (patches.obj, map.obj or map.glb with their RGBA images) or a vertex-coloured mesh (mesh.ply) from a
 // camera pose into an image the size of the captured frame, with a depth buffer.
 #include <filesystem>
 #include <vector>
@@ -35,6 +35,14 @@ struct RenderMesh {
 // material has no image are not drawn. Throws core::Error naming the file that is missing or
 // malformed.
 RenderMesh readTexturedObj(const std::filesystem::path& path);
+
+// Reads a binary glTF (as tessera writes map.glb): the triangles of every primitive whose
+// material has a base colour texture, with TEXCOORD_0; a REPEAT sampler repeats. Objects
+// without a texture (the vertex-coloured residual) are not drawn, as in the OBJ. Throws
+// core::Error naming the file that is missing or malformed.
+RenderMesh readTexturedGlb(const std::filesystem::path& path);
+// readTexturedGlb for a .glb, else readTexturedObj.
+RenderMesh readTexturedMap(const std::filesystem::path& path);
 
 // Reads a vertex-coloured PLY (mesh.ply). Throws core::Error naming the file.
 RenderMesh readColouredPly(const std::filesystem::path& path);

@@ -26,7 +26,7 @@ struct MapMaterial {
 
 struct MapObject {
   std::string name;
-  std::optional<std::size_t> material;     // index into MapModel::materials; none: vertex colours
+  std::optional<std::size_t> material;     // index into MapModel::materials
   std::vector<Eigen::Vector3d> positions;  // world, metres
   // Per vertex, OBJ convention: s right, t up, the image spanning [0, 1] (or one lattice cell).
   std::vector<Eigen::Vector2d> uvs;

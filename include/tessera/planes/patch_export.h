@@ -49,6 +49,10 @@ struct TextureBinding {
 };
 using TextureBindings = std::map<int, TextureBinding>;  // by patch id
 
+// The texture of the patch's current version, if there is one (else none: the patch grew
+// since, or was never textured).
+const TextureBinding* currentTexture(const Patch& patch, const TextureBindings& textures);
+
 // OBJ texture coordinates (s right, t up) of plane point (u, v) in what `texture` shows (its
 // map texture, else its own bitmap): the image spans [0, 1], a lattice tile one cell. Clamped
 // to [0, 1], unless the image repeats or `clamp` is false (then the sampler clamps).

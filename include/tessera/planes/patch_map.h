@@ -130,6 +130,7 @@ struct Patch {
   // normal, axes made orthogonal to the normal. Cells and samples keep their (u, v).
   struct Frame {
     Eigen::Vector3d origin, u_axis, v_axis;
+    Eigen::Vector3d at(double u, double v) const { return origin + u * u_axis + v * v_axis; }
   };
   Frame planeFrame() const;
 
