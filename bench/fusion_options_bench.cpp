@@ -10,9 +10,11 @@
 //     frames: Open3D's legacy RGB-D odometry + ScalableTSDFVolume, printed as a ratio.
 //
 //   fusion_options_bench [SOURCE] [--max-frames N] [--threads N] [--skip-options]
+//                        [--intrinsics fx,fy,cx,cy] [--depth-scale UNITS_PER_M]
 #include <chrono>
 #include <filesystem>
 #include <functional>
+#include <optional>
 
 #include <fmt/format.h>
 #include <omp.h>
@@ -33,6 +35,7 @@
 #include <opencv2/rgbd.hpp>
 
 #include "bench_frames.h"
+#include "tessera/core/intrinsics.h"
 #include "tessera/core/log.h"
 #include "tessera/eval/trajectory.h"
 #include "tessera/fusion/tsdf_map.h"
@@ -354,7 +357,11 @@ int main(int argc, char** argv) {
   std::size_t max_frames = 0;
   int threads = 2;
   bool skip_options = false;
+  std::string intrinsics_spec;
+  std::optional<double> depth_units_per_m;
   app.add_option("SOURCE", source_path, "Dataset folder or .oni recording with ground truth");
+  app.add_option("--intrinsics", intrinsics_spec, "fx,fy,cx,cy as given to tessera run");
+  app.add_option("--depth-scale", depth_units_per_m, "Raw depth units per metre");
   app.add_option("--max-frames", max_frames, "Frames to use (0: all)");
   app.add_option("--threads", threads, "Threads for OpenMP, OpenCV and the flow graph")
       ->check(CLI::PositiveNumber);
@@ -366,7 +373,10 @@ int main(int argc, char** argv) {
   o3d::utility::SetVerbosityLevel(o3d::utility::VerbosityLevel::Error);
 
   try {
-    const auto frames = tessera::bench::loadFrames(source_path, max_frames, /*need_truth=*/true);
+    std::optional<tessera::core::Intrinsics> intrinsics;
+    if (!intrinsics_spec.empty()) intrinsics = tessera::core::parseIntrinsicsSpec(intrinsics_spec);
+    const auto frames = tessera::bench::loadFrames(source_path, max_frames, /*need_truth=*/true,
+                                                   intrinsics, depth_units_per_m);
     fmt::print("{} frames of {}x{} from {}, {} threads\n", frames.size(),
                frames.front().intrinsics.width, frames.front().intrinsics.height,
                tessera::bench::resolvedSource(source_path), threads);
