@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <map>
 
 #include <fmt/format.h>
 #include <opencv2/imgproc.hpp>
@@ -34,8 +35,9 @@ struct RunPatch {
   int id = 0;
   FramedPlane plane;  // in the run's world frame
   std::vector<PatchOutline> parts;
-  Eigen::Vector3d centroid_W;  // of its outline, in the truth's world frame
-  Eigen::Vector3d normal_W;    // in the truth's world frame
+  // Of its outline, and its normal, in the truth's world frame.
+  Eigen::Vector3d centroid_W = Eigen::Vector3d::Zero();
+  Eigen::Vector3d normal_W = Eigen::Vector3d::UnitZ();
 };
 
 bool covers(const RunPatch& patch, const Eigen::Vector2d& uv) {
@@ -167,26 +169,41 @@ void markSeen(std::vector<TruthPlane>& planes, const nlohmann::json& truth, cons
 
 std::vector<RunPatch> readPatches(const nlohmann::json& json, const core::Isometry& T_gt_est) {
   if (!json.contains("patches")) throw core::Error("patches file has no \"patches\"");
+  // The tiles of one plane (same "plane", one frame) are evaluated as one patch: cutting a
+  // large plane into tiles is not a duplicate.
   std::vector<RunPatch> patches;
+  std::vector<Eigen::Vector2d> weighted;
+  std::vector<double> areas;
+  std::map<int, std::size_t> index_of_plane;
   for (const auto& p : json.at("patches")) {
-    RunPatch patch;
-    patch.id = p.at("id").get<int>();
-    patch.plane = {vec3(p.at("normal")), vec3(p.at("origin")), vec3(p.at("u_axis")),
-                   vec3(p.at("v_axis")), p.at("offset_m").get<double>()};
-    Eigen::Vector2d weighted = Eigen::Vector2d::Zero();
-    double area = 0.0;
+    const int id = p.at("id").get<int>();
+    const int plane = p.value("plane", id);
+    const auto [it, added] = index_of_plane.try_emplace(plane, patches.size());
+    if (added) {
+      RunPatch patch;
+      patch.id = plane;
+      patch.plane = {vec3(p.at("normal")), vec3(p.at("origin")), vec3(p.at("u_axis")),
+                     vec3(p.at("v_axis")), p.at("offset_m").get<double>()};
+      patches.push_back(std::move(patch));
+      weighted.emplace_back(Eigen::Vector2d::Zero());
+      areas.push_back(0.0);
+    }
+    const std::size_t i = it->second;
     for (const auto& part : p.at("outline")) {
       PatchOutline outline{polygonOf(part.at("outer")), {}};
       for (const auto& hole : part.at("holes")) outline.holes.push_back(polygonOf(hole));
       const auto [c, a] = centroidOf(outline.outer);
-      weighted += a * c;
-      area += a;
-      patch.parts.push_back(std::move(outline));
+      weighted[i] += a * c;
+      areas[i] += a;
+      patches[i].parts.push_back(std::move(outline));
     }
-    const Eigen::Vector2d centroid_uv = area > 0.0 ? Eigen::Vector2d(weighted / area) : weighted;
+  }
+  for (std::size_t i = 0; i < patches.size(); ++i) {
+    RunPatch& patch = patches[i];
+    const Eigen::Vector2d centroid_uv =
+        areas[i] > 0.0 ? Eigen::Vector2d(weighted[i] / areas[i]) : weighted[i];
     patch.centroid_W = T_gt_est * patch.plane.pointAt(centroid_uv);
     patch.normal_W = T_gt_est.linear() * patch.plane.normal;
-    patches.push_back(std::move(patch));
   }
   return patches;
 }

@@ -23,15 +23,16 @@ class AccessorReader {
     const tinygltf::BufferView& view =
         model.bufferViews.at(static_cast<std::size_t>(accessor_.bufferView));
     const tinygltf::Buffer& buffer = model.buffers.at(static_cast<std::size_t>(view.buffer));
-    const int size = tinygltf::GetComponentSizeInBytes(static_cast<std::uint32_t>(accessor_.componentType)) *
-                     tinygltf::GetNumComponentsInType(static_cast<std::uint32_t>(accessor_.type));
+    const int size =
+        tinygltf::GetComponentSizeInBytes(static_cast<std::uint32_t>(accessor_.componentType)) *
+        tinygltf::GetNumComponentsInType(static_cast<std::uint32_t>(accessor_.type));
     stride_ = view.byteStride > 0 ? view.byteStride : static_cast<std::size_t>(size);
     data_ = buffer.data.data() + view.byteOffset + accessor_.byteOffset;
     if (size <= 0 || view.byteOffset + accessor_.byteOffset +
                              (accessor_.count > 0 ? (accessor_.count - 1) * stride_ + size : 0) >
                          buffer.data.size()) {
-      throw core::Error(fmt::format("{}: accessor {} reaches past its buffer", file,
-                                    accessor_index));
+      throw core::Error(
+          fmt::format("{}: accessor {} reaches past its buffer", file, accessor_index));
     }
   }
   std::size_t count() const { return accessor_.count; }
@@ -43,7 +44,8 @@ class AccessorReader {
   std::uint32_t indexAt(std::size_t i) const {
     const std::uint8_t* at = data_ + i * stride_;
     switch (accessor_.componentType) {
-      case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: return *at;
+      case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE:
+        return *at;
       case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: {
         std::uint16_t v = 0;
         std::memcpy(&v, at, 2);
@@ -83,9 +85,9 @@ std::optional<TextureImage> baseColourTexture(const tinygltf::Model& model,
     cv::Mat alpha(pixels.size(), CV_8UC1, cv::Scalar(255));
     cv::merge(std::vector<cv::Mat>{pixels, alpha}, out.rgba);
   }
-  out.repeat = texture.sampler < 0 ||
-               model.samplers.at(static_cast<std::size_t>(texture.sampler)).wrapS ==
-                   TINYGLTF_TEXTURE_WRAP_REPEAT;
+  out.repeat =
+      texture.sampler < 0 || model.samplers.at(static_cast<std::size_t>(texture.sampler)).wrapS ==
+                                 TINYGLTF_TEXTURE_WRAP_REPEAT;
   return out;
 }
 
@@ -98,8 +100,8 @@ RenderMesh readTexturedGlb(const std::filesystem::path& path) {
   std::string error, warning;
   if (!std::filesystem::is_regular_file(path) ||
       !loader.LoadBinaryFromFile(&model, &error, &warning, file)) {
-    throw core::Error(
-        fmt::format("{}: cannot be read as binary glTF{}", file, error.empty() ? "" : ": " + error));
+    throw core::Error(fmt::format("{}: cannot be read as binary glTF{}", file,
+                                  error.empty() ? "" : ": " + error));
   }
   RenderMesh mesh;
   std::vector<int> texture_of_material;
@@ -113,15 +115,16 @@ RenderMesh readTexturedGlb(const std::filesystem::path& path) {
       if (node.mesh < 0) continue;
       if (!node.matrix.empty() || !node.translation.empty() || !node.rotation.empty() ||
           !node.scale.empty()) {
-        throw core::Error(fmt::format("node '{}' has a transform (tessera writes none)", node.name));
+        throw core::Error(
+            fmt::format("node '{}' has a transform (tessera writes none)", node.name));
       }
       for (const tinygltf::Primitive& primitive :
            model.meshes.at(static_cast<std::size_t>(node.mesh)).primitives) {
-        const int texture = primitive.material >= 0 &&
-                                    static_cast<std::size_t>(primitive.material) <
-                                        texture_of_material.size()
-                                ? texture_of_material[static_cast<std::size_t>(primitive.material)]
-                                : -1;
+        const int texture =
+            primitive.material >= 0 &&
+                    static_cast<std::size_t>(primitive.material) < texture_of_material.size()
+                ? texture_of_material[static_cast<std::size_t>(primitive.material)]
+                : -1;
         const auto position = primitive.attributes.find("POSITION");
         const auto st = primitive.attributes.find("TEXCOORD_0");
         // Untextured objects (the vertex-coloured residual) are not drawn, as in the OBJ.
@@ -156,7 +159,8 @@ RenderMesh readTexturedGlb(const std::filesystem::path& path) {
       }
     }
   } catch (const std::out_of_range&) {
-    throw core::Error(fmt::format("{}: refers to an accessor, view or image it does not have", file));
+    throw core::Error(
+        fmt::format("{}: refers to an accessor, view or image it does not have", file));
   } catch (const core::Error& e) {
     throw core::Error(fmt::format("{}: {}", file, e.what()));
   }

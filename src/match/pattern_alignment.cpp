@@ -138,8 +138,8 @@ std::optional<core::Similarity2> alignPattern(const cv::Mat& tile_rgb, const cv:
     }
   }
   const std::size_t keep = std::min<std::size_t>(coarse > 1.0 || stride > 1 ? 4 : 1, phases.size());
-  std::partial_sort(phases.begin(), phases.begin() + static_cast<std::ptrdiff_t>(keep), phases.end(),
-                    [](const auto& x, const auto& y) { return x.first < y.first; });
+  std::partial_sort(phases.begin(), phases.begin() + static_cast<std::ptrdiff_t>(keep),
+                    phases.end(), [](const auto& x, const auto& y) { return x.first < y.first; });
   Eigen::Vector2d best_t = phases.front().second;
   double best_cost = std::numeric_limits<double>::infinity();
   for (std::size_t p = 0; p < keep; ++p) {

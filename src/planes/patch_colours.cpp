@@ -34,8 +34,8 @@ struct ColourTarget {
   // are out of memory.
   TileTarget* tileAt(float u, float v) {
     if (!grid.cut()) return &tiles.front();
-    const Cell key = grid.keyOf({static_cast<int>(std::floor(u / cell_m)),
-                                 static_cast<int>(std::floor(v / cell_m))});
+    const Cell key = grid.keyOf(
+        {static_cast<int>(std::floor(u / cell_m)), static_cast<int>(std::floor(v / cell_m))});
     for (TileTarget& tile : tiles) {
       if (tile.key == key) return &tile;
     }

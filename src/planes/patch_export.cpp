@@ -260,6 +260,8 @@ void writePatchesJson(const PatchMap& map, const std::filesystem::path& path,
       instance_json["overlays"] = overlays;
     }
     patches.push_back({{"id", patch.id},
+                       {"plane", patch.plane},
+                       {"tile", {patch.tile.first, patch.tile.second}},
                        {"version", patch.version},
                        {"normal", vectorJson(patch.normal)},
                        {"offset_m", patch.offset},

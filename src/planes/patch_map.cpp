@@ -97,7 +97,8 @@ Cell TileGrid::keyOf(const Cell& cell) const {
 }
 
 Patch& PatchMap::patchWithId(int id) {
-  return *std::find_if(patches_.begin(), patches_.end(), [&](const Patch& p) { return p.id == id; });
+  return *std::find_if(patches_.begin(), patches_.end(),
+                       [&](const Patch& p) { return p.id == id; });
 }
 
 Patch& PatchMap::tileAt(int plane_id, const Cell& key) {
@@ -213,7 +214,8 @@ void PatchMap::mergePlane(int into_id, int from_id, std::vector<int>& ids) {
     restoreSamples(gone);
     if (gone.version > 0) pending_.push_back({PatchEvent::Kind::kRetired, gone.id, gone.version});
     seen_this_frame_.erase(gone.id);
-    const Patch frame = [&] {  // the receiving plane's frame (no cells, no samples)
+    // The receiving plane's frame, copied: placing cells may add tiles, which moves patches.
+    const Patch frame = [&] {
       const Patch& first = patchWithId(into_id);
       Patch copy;
       copy.origin = first.origin;
@@ -284,7 +286,8 @@ std::vector<int> PatchMap::add(const std::vector<PlaneObservation>& observations
       patch.samples = ColourSamples(config_.sample_cell_m);
       PlaneState& state = planes_[patch.id];
       if (config_.tile_m > 0.0) {
-        state.grid.tile_cells = std::max(1, static_cast<int>(std::lround(config_.tile_m / config_.cell_m)));
+        state.grid.tile_cells =
+            std::max(1, static_cast<int>(std::lround(config_.tile_m / config_.cell_m)));
       }
       planes.push_back(patch.id);
       patches_.push_back(std::move(patch));

@@ -20,8 +20,12 @@ json truthScene() {
                 {"polygon_uv", {{0.0, 0.0}, {w, 0.0}, {w, h}, {0.0, h}}}};
   };
   return json{{"intrinsics",
-               {{"fx", 525.0}, {"fy", 525.0}, {"cx", 319.5}, {"cy", 239.5},
-                {"width", 640}, {"height", 480}}},
+               {{"fx", 525.0},
+                {"fy", 525.0},
+                {"cx", 319.5},
+                {"cy", 239.5},
+                {"width", 640},
+                {"height", 480}}},
               {"planes", {plane("wall", 2.0, 2.0, 1.6), plane("poster", 1.995, 0.6, 0.8)}}};
 }
 
@@ -36,8 +40,8 @@ json patch(int id, double z_m, double u0, double u1, double v0, double v1) {
               {"origin", {0.0, 0.0, z_m}},
               {"u_axis", {1.0, 0.0, 0.0}},
               {"v_axis", {0.0, 1.0, 0.0}},
-              {"outline", {{{"outer", {{u0, v0}, {u1, v0}, {u1, v1}, {u0, v1}}},
-                            {"holes", json::array()}}}}};
+              {"outline",
+               {{{"outer", {{u0, v0}, {u1, v0}, {u1, v1}, {u0, v1}}}, {"holes", json::array()}}}}};
 }
 
 json patches(std::initializer_list<json> list) {
@@ -45,9 +49,9 @@ json patches(std::initializer_list<json> list) {
 }
 
 TEST(PlaneEvaluation, AnExactPatchFindsThePlaneAndThePosterCountsAsPartOfIt) {
-  const PlaneEvaluation result = evaluatePlanes(
-      truthScene(), onePose(), patches({patch(0, 2.0, -1.0, 1.0, -0.8, 0.8)}),
-      core::Isometry::Identity());
+  const PlaneEvaluation result =
+      evaluatePlanes(truthScene(), onePose(), patches({patch(0, 2.0, -1.0, 1.0, -0.8, 0.8)}),
+                     core::Isometry::Identity());
   ASSERT_EQ(result.planes.size(), 1u);  // the poster is an overlay of the wall
   const PlaneResult& wall = result.planes.front();
   EXPECT_EQ(wall.id, "wall");
@@ -68,15 +72,37 @@ TEST(PlaneEvaluation, ADuplicatePatchCountsAgainstPrecision) {
   EXPECT_DOUBLE_EQ(result.precision, 0.5);
 }
 
+// A plane cut into tiles (patches.tile_m) is one patch for the evaluation: two tiles of one
+// plane that together cover the wall find it; the same halves as two planes are duplicates
+// that each cover half.
+TEST(PlaneEvaluation, TheTilesOfOnePlaneAreEvaluatedTogether) {
+  json left = patch(0, 2.0, -1.0, 0.0, -0.8, 0.8), right = patch(1, 2.0, 0.0, 1.0, -0.8, 0.8);
+  left["plane"] = 0;
+  right["plane"] = 0;
+  const auto tiles =
+      evaluatePlanes(truthScene(), onePose(), patches({left, right}), core::Isometry::Identity());
+  EXPECT_EQ(tiles.patches, 1u);
+  EXPECT_DOUBLE_EQ(tiles.recall, 1.0);
+  EXPECT_DOUBLE_EQ(tiles.precision, 1.0);
+  EXPECT_GT(tiles.planes.front().iou, 0.97);
+
+  right["plane"] = 1;
+  const auto apart =
+      evaluatePlanes(truthScene(), onePose(), patches({left, right}), core::Isometry::Identity());
+  EXPECT_EQ(apart.patches, 2u);
+  EXPECT_DOUBLE_EQ(apart.recall, 0.0);
+  EXPECT_DOUBLE_EQ(apart.precision, 0.5);
+}
+
 TEST(PlaneEvaluation, APatchOffByTwoCentimetresOrCoveringHalfIsNotAFind) {
-  const auto off = evaluatePlanes(truthScene(), onePose(),
-                                  patches({patch(0, 2.02, -1.0, 1.0, -0.8, 0.8)}),
-                                  core::Isometry::Identity());
+  const auto off =
+      evaluatePlanes(truthScene(), onePose(), patches({patch(0, 2.02, -1.0, 1.0, -0.8, 0.8)}),
+                     core::Isometry::Identity());
   EXPECT_DOUBLE_EQ(off.recall, 0.0);
   EXPECT_DOUBLE_EQ(off.precision, 0.0);
-  const auto half = evaluatePlanes(truthScene(), onePose(),
-                                   patches({patch(0, 2.0, -1.0, 0.0, -0.8, 0.8)}),
-                                   core::Isometry::Identity());
+  const auto half =
+      evaluatePlanes(truthScene(), onePose(), patches({patch(0, 2.0, -1.0, 0.0, -0.8, 0.8)}),
+                     core::Isometry::Identity());
   EXPECT_DOUBLE_EQ(half.recall, 0.0);
   EXPECT_NEAR(half.planes.front().iou, 0.5, 0.03);
   EXPECT_DOUBLE_EQ(half.precision, 1.0);  // the one patch is on the wall: not a false plane
@@ -94,8 +120,8 @@ TEST(PlaneEvaluation, TheRunsWorldFrameIsMappedOntoTheTruthsFirst) {
 TEST(PlaneEvaluation, APlaneBeyondTheDepthRangeIsNotCounted) {
   PlaneEvaluationOptions options;
   options.max_depth_m = 1.5;
-  const auto result = evaluatePlanes(truthScene(), onePose(), patches({}),
-                                     core::Isometry::Identity(), options);
+  const auto result =
+      evaluatePlanes(truthScene(), onePose(), patches({}), core::Isometry::Identity(), options);
   EXPECT_EQ(result.planes_counted, 0u);
   EXPECT_NEAR(result.planes.front().seen_m2, 0.0, 1e-12);
 }

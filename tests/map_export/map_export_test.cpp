@@ -10,14 +10,14 @@
 #include <gtest/gtest.h>
 #include <tiny_gltf.h>
 #include <tiny_obj_loader.h>
-#include <opencv2/core.hpp>
 #include <nlohmann/json.hpp>
+#include <opencv2/core.hpp>
 
 #include "support/synthetic_plane.h"
 #include "support/test_data.h"
+#include "tessera/drivers/oni/oni_source.h"
 #include "tessera/eval/trajectory.h"
 #include "tessera/eval/view_render.h"
-#include "tessera/drivers/oni/oni_source.h"
 #include "tessera/map_export/map_model.h"
 #include "tessera/pipeline/run.h"
 
@@ -139,8 +139,9 @@ TEST(MapExport, ARealSequenceMapLoadsBackInBothFormats) {
   ASSERT_EQ(from_glb.textures.size(), from_obj.textures.size());
   const eval::Trajectory poses = eval::readTumTrajectory(out / "trajectory.txt");
   ASSERT_GE(poses.size(), 3u);
-  for (const auto& at : {poses.begin(), std::next(poses.begin(), static_cast<long>(poses.size() / 2)),
-                         std::prev(poses.end())}) {
+  for (const auto& at :
+       {poses.begin(), std::next(poses.begin(), static_cast<long>(poses.size() / 2)),
+        std::prev(poses.end())}) {
     const eval::ViewImage a = eval::renderView(from_obj, test::kinectIntrinsics(), at->second);
     const eval::ViewImage b = eval::renderView(from_glb, test::kinectIntrinsics(), at->second);
     const cv::Mat covered_a = a.depth > 0, covered_b = b.depth > 0;

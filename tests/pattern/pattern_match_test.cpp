@@ -110,7 +110,8 @@ TEST(PatternReuse, ALargeCellFindsItsPhaseThroughTheCoarseSearch) {
   // The same tile, starting 37 texels along and 51 down: another phase of the same floor.
   cv::Mat shifted(h, w, CV_8UC3);
   for (int j = 0; j < h; ++j) {
-    for (int i = 0; i < w; ++i) shifted.at<cv::Vec3b>(j, i) = tile.at<cv::Vec3b>((j + 51) % h, (i + 37) % w);
+    for (int i = 0; i < w; ++i)
+      shifted.at<cv::Vec3b>(j, i) = tile.at<cv::Vec3b>((j + 51) % h, (i + 37) % w);
   }
   const auto aligned = match::alignPattern(shifted, {}, lattice, *stored);
   ASSERT_TRUE(aligned);

@@ -3,8 +3,8 @@
 #include <filesystem>
 #include <limits>
 #include <map>
-#include <set>
 #include <random>
+#include <set>
 #include <tuple>
 
 #include <gtest/gtest.h>
@@ -197,7 +197,8 @@ TEST(PatchTiles, ASurfaceNoLongerThanATileIsNeverCut) {
   config.tile_m = 6.0;
   PatchMap map(config);
   // Seen first near one end, then growing to 5.9 m: tile 0 is placed to hold it whole.
-  for (double x = 5.0; x >= 0.0; x -= 1.0) map.add({strip(x, std::min(x + 1.1, 5.9), 0.0, 2.0, 0.75)});
+  for (double x = 5.0; x >= 0.0; x -= 1.0)
+    map.add({strip(x, std::min(x + 1.1, 5.9), 0.0, 2.0, 0.75)});
   ASSERT_EQ(map.patches().size(), 1u);
   EXPECT_NEAR(map.areaM2(map.patches().front()), 5.9 * 2.0, 0.5);
 }

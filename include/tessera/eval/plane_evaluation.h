@@ -17,10 +17,10 @@ struct PlaneEvaluationOptions {
   double min_seen_m2 = 0.25;    // ground-truth planes seen less than this are not counted
   double max_normal_deg = 2.0;  // a patch matches a plane within these bounds...
   double max_offset_m = 0.01;
-  double min_iou = 0.8;    // ... and finds it with at least this outline IoU
-  double cell_m = 0.05;    // raster of the plane in which seen area and IoU are measured
-  int frame_step = 4;      // visibility from every N-th ground-truth pose ...
-  int pixel_step = 4;      // ... and every N-th pixel
+  double min_iou = 0.8;  // ... and finds it with at least this outline IoU
+  double cell_m = 0.05;  // raster of the plane in which seen area and IoU are measured
+  int frame_step = 4;    // visibility from every N-th ground-truth pose ...
+  int pixel_step = 4;    // ... and every N-th pixel
 };
 
 struct PlaneResult {
@@ -37,17 +37,18 @@ struct PlaneResult {
 struct PlaneEvaluation {
   std::size_t planes_counted = 0;
   std::size_t planes_found = 0;
-  std::size_t patches = 0;
+  std::size_t patches = 0;          // the run's planes: the tiles of one plane count once
   std::size_t patches_matched = 0;  // the best match of some ground-truth plane
-  double recall = 0.0;     // planes_found / planes_counted (0 when none is counted)
-  double precision = 0.0;  // patches_matched / patches (0 when there is no patch)
+  double recall = 0.0;              // planes_found / planes_counted (0 when none is counted)
+  double precision = 0.0;           // patches_matched / patches (0 when there is no patch)
   std::vector<PlaneResult> planes;
 };
 
 // `truth` is a parsed .gt.json with "planes" and "intrinsics", `truth_poses` its camera poses
 // (what the camera saw is ray-cast from them), `patches` a parsed patches.json. T_gt_est maps
-// the run's world frame onto the truth's (the trajectory alignment). Overlay planes (a poster lying on a wall, within the offset bound) count as part
-// of the plane they lie on. Throws core::Error when a file lacks what is needed.
+// the run's world frame onto the truth's (the trajectory alignment). Overlay planes (a poster lying
+// on a wall, within the offset bound) count as part of the plane they lie on. Throws core::Error
+// when a file lacks what is needed.
 PlaneEvaluation evaluatePlanes(const nlohmann::json& truth, const Trajectory& truth_poses,
                                const nlohmann::json& patches, const core::Isometry& T_gt_est,
                                const PlaneEvaluationOptions& options = {});

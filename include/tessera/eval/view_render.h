@@ -1,7 +1,7 @@
 #pragma once
 // A small CPU rasteriser for the view evaluation (docs/METRICS.md, view PSNR): renders a
-// textured map (patches.obj, map.obj or map.glb with their RGBA images) or a vertex-coloured mesh (mesh.ply) from a
-// camera pose into an image the size of the captured frame, with a depth buffer.
+// textured map (patches.obj, map.obj or map.glb with their RGBA images) or a vertex-coloured mesh
+// (mesh.ply) from a camera pose into an image the size of the captured frame, with a depth buffer.
 #include <filesystem>
 #include <vector>
 

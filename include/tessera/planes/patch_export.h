@@ -80,8 +80,9 @@ constexpr double kOverlayLift_m = 0.001;
 void writePatchesObj(const PatchMap& map, const std::filesystem::path& path,
                      const TextureBindings& textures = {});
 
-// patches.json: {"format": "tessera patches 1", "cell_m": ..., "patches": [{"id", "version",
-// "normal", "offset_m", "origin", "u_axis", "v_axis", "area_m2", "colour_samples",
+// patches.json: {"format": "tessera patches 1", "cell_m": ..., "patches": [{"id", "plane" (the
+// id of the plane's first tile; tiles of one plane share it and its frame), "tile": [i, j],
+// "version", "normal", "offset_m", "origin", "u_axis", "v_axis", "area_m2", "colour_samples",
 // "outline": [{"outer": [[u, v], ...], "holes": [[[u, v], ...], ...]}], "texture": {"image",
 // "state_image", "texel_m", "origin_uv", "x_axis", "y_axis", "width", "height", "observed",
 // "inpainted"} or null, "instance": {"texture_id", "image", "width", "height", "transform":

@@ -95,8 +95,8 @@ struct TileGrid {
 // One tile of a plane (the whole plane, if it is not cut).
 struct Patch {
   int id = 0;
-  int plane = 0;     // the id of the plane's first tile; every tile of a plane shares it
-  Cell tile{0, 0};   // the tile's key in its plane's TileGrid
+  int plane = 0;    // the id of the plane's first tile; every tile of a plane shares it
+  Cell tile{0, 0};  // the tile's key in its plane's TileGrid
   Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();  // n . X = offset
   double offset = 0.0;
   // The plane, shared by its tiles. In-plane frame fixed when the plane is created: cells are
