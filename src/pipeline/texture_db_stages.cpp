@@ -69,11 +69,49 @@ std::vector<match::CcvNeighbour> StoreCatalog::nearest(const std::vector<float>&
   return index_.query(ccv, max_distance, k);
 }
 
+namespace {
+
+std::size_t bytesOf(const cv::Mat& m) { return m.total() * m.elemSize(); }
+
+std::size_t bytesOf(const match::StoredTexture& t) {
+  return bytesOf(t.description.rgb) + bytesOf(t.description.mask) +
+         bytesOf(t.description.features.descriptors) +
+         t.description.features.keypoints.size() * sizeof(cv::KeyPoint) + bytesOf(t.tile_rgb) +
+         bytesOf(t.tile_mask) + t.description.ccv.values.size() * sizeof(float);
+}
+
+}  // namespace
+
+void StoreCatalog::hold(std::shared_ptr<const match::StoredTexture> texture) const {
+  const std::int64_t id = texture->id;
+  if (const auto it = cache_.find(id); it != cache_.end()) {
+    cached_bytes_ -= it->second.bytes;
+    recency_.erase(it->second.recency);
+    cache_.erase(it);
+  }
+  recency_.push_front(id);
+  const std::size_t bytes = bytesOf(*texture);
+  cache_[id] = {std::move(texture), bytes, recency_.begin()};
+  cached_bytes_ += bytes;
+  const auto budget = static_cast<std::size_t>(config_.catalog_cache_mb * 1e6);
+  while (cached_bytes_ > budget && recency_.size() > 1) {
+    const auto gone = cache_.find(recency_.back());
+    cached_bytes_ -= gone->second.bytes;
+    cache_.erase(gone);
+    recency_.pop_back();
+  }
+}
+
 std::shared_ptr<const match::StoredTexture> StoreCatalog::load(std::int64_t id) const {
-  if (const auto it = cache_.find(id); it != cache_.end()) return it->second;
+  if (const auto it = cache_.find(id); it != cache_.end()) {
+    recency_.splice(recency_.begin(), recency_, it->second.recency);
+    return it->second.texture;
+  }
   const std::optional<db::TextureRecord> record = store_.texture(id);
   if (!record) return nullptr;
-  return cache_.emplace(id, storedTextureOf(*record, config_)).first->second;
+  std::shared_ptr<const match::StoredTexture> texture = storedTextureOf(*record, config_);
+  hold(texture);
+  return texture;
 }
 
 void StoreCatalog::add(std::shared_ptr<const match::StoredTexture> texture) {
@@ -82,7 +120,7 @@ void StoreCatalog::add(std::shared_ptr<const match::StoredTexture> texture) {
     index_.add(texture->id, texture->description.ccv.values);
     ++size_;
   }
-  cache_[texture->id] = std::move(texture);
+  hold(std::move(texture));
 }
 
 DescribedPatch DescribeStage::process(const PatchJob& job) const {

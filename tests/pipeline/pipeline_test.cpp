@@ -5,12 +5,14 @@
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 
+#include "db/store_test_support.h"
 #include "support/synthetic_plane.h"
 #include "support/test_data.h"
 #include "tessera/core/error.h"
 #include "tessera/drivers/dataset_source.h"
 #include "tessera/eval/run_evaluation.h"
 #include "tessera/pipeline/run.h"
+#include "tessera/pipeline/texture_db_stages.h"
 
 namespace tessera::pipeline {
 namespace {
@@ -364,6 +366,42 @@ TEST(Pipeline, RealTumTexturesRenderAboutAsFaithfullyAsTheMeshOnTrainingAndHeldO
   EXPECT_GT(held_out, figures["view_psnr_baseline_holdout_mean"].get<double>() - 1.2);
 }
 
+// The matcher's catalog keeps stored textures in memory up to its budget, least recently used
+// out first, and reads an evicted one back from the database unchanged.
+TEST(StoreCatalog, KeepsTexturesWithinItsBudgetAndReadsEvictedOnesBack) {
+  const auto store = db::openSqliteStore(test::freshTempDir() / "textures.db");
+  const std::int64_t run = store->beginRun("catalog test");
+  db::Commit commit;
+  for (std::uint32_t seed = 1; seed <= 3; ++seed) {
+    db::TextureRecord texture = db::test::makeTexture(seed, 200, 200);
+    texture.run_id = run;
+    texture.content_key = "catalog test " + std::to_string(seed);
+    commit.textures.push_back(texture);
+  }
+  const std::vector<std::int64_t> ids = store->commit(commit);
+  ASSERT_EQ(ids.size(), 3u);
+  match::MatchConfig config;
+  config.catalog_cache_mb = 0.35;  // about two of these textures (200 x 200 x 4 bytes each)
+  const StoreCatalog catalog(*store, config);
+  EXPECT_EQ(catalog.size(), 3u);
+  const auto first = catalog.load(ids[0]);
+  ASSERT_TRUE(first);
+  const std::size_t one = catalog.cachedBytes();
+  EXPECT_GT(one, 160000u);
+  catalog.load(ids[1]);
+  EXPECT_EQ(catalog.cachedBytes(), 2 * one);
+  catalog.load(ids[0]);  // used again: ids[1] is now the least recently used
+  catalog.load(ids[2]);
+  EXPECT_LE(catalog.cachedBytes(), 350000u);
+  const auto again = catalog.load(ids[0]);  // still held: the same object
+  EXPECT_EQ(again.get(), first.get());
+  const auto back = catalog.load(ids[1]);  // evicted: read back from the database
+  ASSERT_TRUE(back);
+  EXPECT_EQ(cv::norm(back->description.rgb, commit.textures[1].rgb, cv::NORM_INF), 0.0);
+  EXPECT_EQ(back->description.features.keypoints.size(), commit.textures[1].keypoints.size());
+  EXPECT_LE(catalog.cachedBytes(), 350000u);
+}
+
 TEST(RunConfig, DefaultYamlDocumentsEveryKeyWithTheStructDefaults) {
   const auto doc = core::ConfigDocument::load(test::sourceDir() / "config/default.yaml");
   const RunConfig from_file = readRunConfig(doc);
@@ -386,6 +424,8 @@ TEST(RunConfig, DefaultYamlDocumentsEveryKeyWithTheStructDefaults) {
   EXPECT_EQ(from_file.tracker.features.max_depth_m, defaults.tracker.features.max_depth_m);
   EXPECT_EQ(from_file.pose_correction.enabled, defaults.pose_correction.enabled);
   EXPECT_EQ(from_file.patches.colour_every_n_frames, defaults.patches.colour_every_n_frames);
+  EXPECT_EQ(from_file.patches.tile_m, defaults.patches.tile_m);
+  EXPECT_EQ(from_file.match.catalog_cache_mb, defaults.match.catalog_cache_mb);
   EXPECT_EQ(from_file.tracker.iterations_per_level, defaults.tracker.iterations_per_level);
   EXPECT_EQ(from_file.tracker.max_translation_m, defaults.tracker.max_translation_m);
   EXPECT_EQ(from_file.tracker.max_rotation_deg, defaults.tracker.max_rotation_deg);

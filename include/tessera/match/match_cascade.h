@@ -37,6 +37,10 @@ struct MatchConfig {
   // Bitmaps longer than this (pixels) are described (CCV, features) at this size: a wall's
   // 1000-texel bitmap costs 4 times less, and keypoints are scaled back to full size.
   int describe_max_px = 640;
+  // Stored textures the matcher keeps described in memory, least recently used out first
+  // (they are read back from the database when needed again): memory stays bounded as the
+  // database grows.
+  double catalog_cache_mb = 256.0;
 };
 
 // A bitmap as the cascade sees it, computed once per new bitmap (and stored with a texture).

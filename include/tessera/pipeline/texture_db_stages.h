@@ -7,6 +7,7 @@
 #include <chrono>
 #include <cstddef>
 #include <cstdint>
+#include <list>
 #include <map>
 #include <memory>
 #include <optional>
@@ -96,13 +97,26 @@ class StoreCatalog : public match::TextureCatalog {
 
   // After a commit.
   void add(std::shared_ptr<const match::StoredTexture> texture);
+  // Bytes of the textures held in memory now (at most MatchConfig::catalog_cache_mb, or one).
+  std::size_t cachedBytes() const { return cached_bytes_; }
 
  private:
+  // Holds `texture` as the most recently used, dropping the least recently used beyond the
+  // budget (never the one just held).
+  void hold(std::shared_ptr<const match::StoredTexture> texture) const;
+
+  struct Cached {
+    std::shared_ptr<const match::StoredTexture> texture;
+    std::size_t bytes = 0;
+    std::list<std::int64_t>::iterator recency;
+  };
   const db::TextureStore& store_;
   match::MatchConfig config_;
   match::CcvIndex index_;
   std::size_t size_ = 0;
-  mutable std::map<std::int64_t, std::shared_ptr<const match::StoredTexture>> cache_;
+  mutable std::map<std::int64_t, Cached> cache_;
+  mutable std::list<std::int64_t> recency_;  // most recently used first
+  mutable std::size_t cached_bytes_ = 0;
 };
 
 // A database record as the cascade sees it; features are recomputed when the record's were
