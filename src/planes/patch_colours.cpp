@@ -30,8 +30,8 @@ struct ColourTarget {
   Eigen::Vector3f n_C, origin_C, u_C, v_C;
   float d_C = 0.0F;
 
-  // The tile where the plane point (u, v) lies; none for a tile not cut yet or whose samples
-  // are out of memory.
+  // The tile where the plane point (u, v) lies; none where the plane has no tile yet, or the
+  // tile's samples are out of memory.
   TileTarget* tileAt(float u, float v) {
     if (!grid.cut()) return &tiles.front();
     const Cell key = grid.keyOf(
