@@ -7,6 +7,8 @@ Usage: scripts/make_corridor_scene.py > config/scenes/corridor.yaml
 """
 import math
 
+from scene_path import waypoints
+
 FRAMES = 3200
 ROOM_W, ROOM_D, H = 6.0, 5.0, 2.6      # each room: 6 m along the corridor, 5 m deep
 CORRIDOR_W, WALL = 2.0, 0.15           # corridor width, wall thickness
@@ -109,21 +111,6 @@ def key_poses():
     return poses
 
 
-def waypoints(max_step_m=0.25, max_turn=math.radians(12)):
-    """Key poses subdivided so that every segment moves about as much (the renderer spends the
-    same number of frames on each)."""
-    poses = key_poses()
-    out = [poses[0]]
-    for (x0, y0, a0), (x1, y1, a1) in zip(poses, poses[1:]):
-        turn = math.atan2(math.sin(a1 - a0), math.cos(a1 - a0))
-        n = max(1, math.ceil(max(math.hypot(x1 - x0, y1 - y0) / max_step_m,
-                                 abs(turn) / max_turn)))
-        for i in range(1, n + 1):
-            t = i / n
-            out.append((x0 + t * (x1 - x0), y0 + t * (y1 - y0), a0 + t * turn))
-    return out
-
-
 def main():
     print("# Four rooms along a 24 m corridor (x east, y north, z up; floor at z = 0), walked")
     print("# through room by room: the long-run scene for memory and throughput benches.")
@@ -151,7 +138,7 @@ def main():
     print("\nboxes:")
     print("\n".join(scene_boxes()))
     print("\ncamera:\n  waypoints:")
-    for x, y, yaw in waypoints():
+    for x, y, yaw in waypoints(key_poses()):
         lx, ly = x + 2.5 * math.cos(yaw), y + 2.5 * math.sin(yaw)
         print(f"    - {{position: [{x:.3f}, {y:.3f}, 1.5], look_at: [{lx:.3f}, {ly:.3f}, 0.9]}}")
 

@@ -8,6 +8,8 @@ Usage: scripts/make_loop_scene.py > config/scenes/loop.yaml
 """
 import math
 
+from scene_path import waypoints
+
 FRAMES = 1500
 OUTER_X, OUTER_Y, H = 12.0, 10.0, 2.6
 WIDTH = 2.0  # corridor width: the block spans [WIDTH, OUTER - WIDTH] each way
@@ -65,21 +67,6 @@ def key_poses():
     return poses
 
 
-def waypoints(max_step_m=0.25, max_turn=math.radians(12)):
-    """Key poses subdivided so that every segment moves about as much (the renderer spends the
-    same number of frames on each)."""
-    poses = key_poses()
-    out = [poses[0]]
-    for (x0, y0, a0), (x1, y1, a1) in zip(poses, poses[1:]):
-        turn = a1 - a0
-        n = max(1, math.ceil(max(math.hypot(x1 - x0, y1 - y0) / max_step_m,
-                                 abs(turn) / max_turn)))
-        for i in range(1, n + 1):
-            t = i / n
-            out.append((x0 + t * (x1 - x0), y0 + t * (y1 - y0), a0 + t * turn))
-    return out
-
-
 def main():
     print("# A corridor ring around a closed block (x east, y north, z up; floor at z = 0), walked")
     print("# once round and on past the start: the loop-closure scene.")
@@ -107,7 +94,7 @@ def main():
           f"max: [{OUTER_X - WIDTH:.1f}, {OUTER_Y - WIDTH:.1f}, {H:.1f}], top_texture: block, "
           "side_texture: block}")
     print("\ncamera:\n  waypoints:")
-    for x, y, yaw in waypoints():
+    for x, y, yaw in waypoints(key_poses()):
         lx, ly = x + LOOK_AHEAD * math.cos(yaw), y + LOOK_AHEAD * math.sin(yaw)
         print(f"    - {{position: [{x:.3f}, {y:.3f}, {EYE}], "
               f"look_at: [{lx:.3f}, {ly:.3f}, {LOOK_Z}]}}")
