@@ -7,7 +7,7 @@ Usage: scripts/make_corridor_scene.py > config/scenes/corridor.yaml
 """
 import math
 
-from scene_path import waypoints
+from scene_parts import plane, rect, waypoints
 
 FRAMES = 3200
 ROOM_W, ROOM_D, H = 6.0, 5.0, 2.6      # each room: 6 m along the corridor, 5 m deep
@@ -24,17 +24,6 @@ ROOM_STYLE = [
     dict(floor="floor_tiles", walls="plaster", side="brick", poster="poster_a"),
     dict(floor="cobbles", walls="brick", side="plaster", poster="poster_c"),
 ]
-
-
-def plane(pid, texture, origin, u, v, polygon, extra=""):
-    pts = ", ".join(f"[{a:.3f}, {b:.3f}]" for a, b in polygon)
-    o = ", ".join(f"{x:.3f}" for x in origin)
-    return (f"  - {{id: {pid}, texture: {texture}, origin: [{o}], u_axis: {u}, v_axis: {v},\n"
-            f"     polygon: [{pts}]{extra}}}")
-
-
-def rect(w, h):
-    return [(0, 0), (w, 0), (w, h), (0, h)]
 
 
 def scene_planes():

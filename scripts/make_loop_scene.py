@@ -8,7 +8,7 @@ Usage: scripts/make_loop_scene.py > config/scenes/loop.yaml
 """
 import math
 
-from scene_path import waypoints
+from scene_parts import plane, rect, waypoints
 
 FRAMES = 1500
 OUTER_X, OUTER_Y, H = 12.0, 10.0, 2.6
@@ -18,17 +18,6 @@ EYE, LOOK_Z, LOOK_AHEAD = 1.5, 0.9, 2.5
 # Posters along the outer walls, each its own picture, so that places differ: (wall, u, seed).
 POSTERS = [("south", 2.5, 31), ("south", 7.5, 32), ("east", 3.0, 33), ("east", 7.0, 34),
            ("north", 3.5, 35), ("north", 8.5, 36), ("west", 2.5, 37), ("west", 6.5, 38)]
-
-
-def plane(pid, texture, origin, u, v, polygon):
-    pts = ", ".join(f"[{a:.3f}, {b:.3f}]" for a, b in polygon)
-    o = ", ".join(f"{x:.3f}" for x in origin)
-    return (f"  - {{id: {pid}, texture: {texture}, origin: [{o}], u_axis: {u}, v_axis: {v},\n"
-            f"     polygon: [{pts}]}}")
-
-
-def rect(w, h):
-    return [(0, 0), (w, 0), (w, h), (0, h)]
 
 
 # The outer walls seen from inside: origin, u axis (along the wall, left to right as seen),

@@ -1,4 +1,5 @@
-"""Camera paths shared by the scene scripts: key poses (x, y, yaw) subdivided into waypoints."""
+"""What the scene scripts share: plane entries in the scene YAML, and camera paths (key poses
+(x, y, yaw) subdivided into waypoints)."""
 import math
 
 
@@ -14,3 +15,15 @@ def waypoints(poses, max_step_m=0.25, max_turn=math.radians(12)):
             t = i / n
             out.append((x0 + t * (x1 - x0), y0 + t * (y1 - y0), a0 + t * turn))
     return out
+
+
+def plane(pid, texture, origin, u, v, polygon, extra=""):
+    """One `planes` entry of a scene file (docs/SCENES.md)."""
+    pts = ", ".join(f"[{a:.3f}, {b:.3f}]" for a, b in polygon)
+    o = ", ".join(f"{x:.3f}" for x in origin)
+    return (f"  - {{id: {pid}, texture: {texture}, origin: [{o}], u_axis: {u}, v_axis: {v},\n"
+            f"     polygon: [{pts}]{extra}}}")
+
+
+def rect(w, h):
+    return [(0, 0), (w, 0), (w, h), (0, h)]
