@@ -15,6 +15,7 @@
 #include "bench_frames.h"
 #include "tessera/core/error.h"
 #include "tessera/core/log.h"
+#include "tessera/core/pose.h"
 #include "tessera/eval/trajectory.h"
 #include "tessera/fusion/tracker.h"
 
@@ -98,8 +99,10 @@ int main(int argc, char** argv) {
         const auto true_step = truth.at(last_ns).inverse() * *frame.T_W_C_gt;
         const double error_mm = (step.translation() - true_step.translation()).norm() * 1e3;
         worst_step = std::max(worst_step, {error_mm, frame.index});
-        if (verbose && error_mm > 5.0) {
-          fmt::print("frame {}: step off by {:.1f} mm\n", frame.index, error_mm);
+        const double turn_error_deg = tessera::core::rotationAngleDeg(true_step.inverse() * step);
+        if (verbose && (error_mm > 5.0 || turn_error_deg > 0.2)) {
+          fmt::print("frame {}: step off by {:.1f} mm, {:.2f} deg\n", frame.index, error_mm,
+                     turn_error_deg);
         }
       }
       estimate[frame.timestamp_ns] = result.T_W_C;

@@ -15,9 +15,16 @@ OUTER_X, OUTER_Y, H = 12.0, 10.0, 2.6
 WIDTH = 2.0  # corridor width: the block spans [WIDTH, OUTER - WIDTH] each way
 EYE, LOOK_Z, LOOK_AHEAD = 1.5, 0.9, 2.5
 
-# Posters along the outer walls, each its own picture, so that places differ: (wall, u, seed).
-POSTERS = [("south", 2.5, 31), ("south", 7.5, 32), ("east", 3.0, 33), ("east", 7.0, 34),
-           ("north", 3.5, 35), ("north", 8.5, 36), ("west", 2.5, 37), ("west", 6.5, 38)]
+# Posters along the outer walls, each its own picture, so that places differ:
+# (wall, u of the left edge, seed, height of the lower edge).
+POSTERS = [("south", 2.5, 31, 1.2), ("south", 7.5, 32, 1.2), ("east", 3.0, 33, 1.2),
+           ("east", 7.0, 34, 1.2), ("north", 3.5, 35, 1.2), ("north", 8.5, 36, 1.2),
+           ("west", 2.5, 37, 1.2), ("west", 6.5, 38, 1.2)]
+# A notice at each corridor's end, low enough to fill the view when the walk stops 1 m from
+# that wall and turns: without them the view there is a plain wall above a periodic floor,
+# where the tracker slid along the tiles at every corner (ATE 2 m).
+POSTERS += [("east", 8.7, 39, 0.8), ("north", 10.7, 40, 0.8), ("west", 8.7, 41, 0.8),
+            ("south", 10.7, 42, 0.8)]
 
 
 # The outer walls seen from inside: origin, u axis (along the wall, left to right as seen),
@@ -36,9 +43,9 @@ def scene_planes():
            plane("ceiling", "ceiling", (0, 0, H), [0, 1, 0], [1, 0, 0], rect(OUTER_Y, OUTER_X))]
     for name, (origin, u, length, _) in WALLS.items():
         out.append(plane(f"wall_{name}", WALL_TEXTURE[name], origin, u, [0, 0, 1], rect(length, H)))
-    for k, (wall, along, _) in enumerate(POSTERS):
+    for k, (wall, along, _, low) in enumerate(POSTERS):
         origin, u, _, (dx, dy) = WALLS[wall]
-        o = (origin[0] + along * u[0] + dx, origin[1] + along * u[1] + dy, 1.2)
+        o = (origin[0] + along * u[0] + dx, origin[1] + along * u[1] + dy, low)
         out.append(plane(f"poster_{k}_{wall}", f"poster_{k}", o, u, [0, 0, 1], rect(0.6, 0.85)))
     return out
 
@@ -73,7 +80,7 @@ def main():
     print("  - {id: plaster_warm, generator: plaster, seed: 22, colour: [236, 222, 200]}")
     print("  - {id: ceiling, generator: plaster, seed: 14, colour: [240, 240, 236]}")
     print("  - {id: block, generator: plaster, seed: 24, colour: [214, 226, 236]}")
-    for k, (_, _, seed) in enumerate(POSTERS):
+    for k, (_, _, seed, _) in enumerate(POSTERS):
         print(f"  - {{id: poster_{k}, generator: poster, seed: {seed}, width_m: 0.6, "
               "height_m: 0.85}")
     print("\nplanes:")
