@@ -245,12 +245,21 @@ TrackingResult Tracker::track(const core::Frame& frame, const core::Isometry& in
     }
   };
   // Makes `images` (posed at T_W_C) the keyframe frames are tracked against.
-  const auto makeKeyframe = [&](const TrackedImages& images, const core::Isometry& T_W_C) {
+  const auto makeKeyframe = [&](const TrackedImages& images, const core::Isometry& T_W_C,
+                                std::int64_t timestamp_ns, bool starts_segment) {
     if (!prepare(images.odometry, cv::rgbd::OdometryFrame::CACHE_DST)) return false;
     auto keyframe = std::make_shared<Keyframe>();
     keyframe->images = images;
     keyframe->T_W_C = T_W_C;
     keyframe->features = describeFeatures(images.grey, images.depth_m, k, config_.features);
+    auto record = std::make_shared<KeyframeRecord>();
+    record->timestamp_ns = timestamp_ns;
+    record->T_W_C = T_W_C;
+    record->features = keyframe->features;
+    record->depth_m = images.depth_m;
+    record->intrinsics = k;
+    record->starts_segment = starts_segment;
+    result.new_keyframes.push_back(std::move(record));
     s.keyframes.push_back(keyframe);
     while (static_cast<int>(s.keyframes.size()) > std::max(1, config_.relocalisation_keyframes)) {
       s.keyframes.pop_front();
@@ -284,7 +293,7 @@ TrackingResult Tracker::track(const core::Frame& frame, const core::Isometry& in
   }
   const bool prepared = prepare(current.odometry, cv::rgbd::OdometryFrame::CACHE_SRC);
   if (prepared && !s.reference) {
-    if (!makeKeyframe(current, initial_T_W_C)) {
+    if (!makeKeyframe(current, initial_T_W_C, frame.timestamp_ns, true)) {
       result.status = TrackingStatus::kLost;
       return result;
     }
@@ -367,7 +376,7 @@ TrackingResult Tracker::track(const core::Frame& frame, const core::Isometry& in
     if (large_gap) guessFromFeatures(*s.reference);
     T_W_C = solve(*s.reference);
     if (!T_W_C && s.previous.odometry != s.reference->images.odometry &&
-        makeKeyframe(s.previous, s.T_W_previous)) {
+        makeKeyframe(s.previous, s.T_W_previous, s.previous_timestamp_ns, false)) {
       // The keyframe may be too far from this view: try again from the last tracked frame.
       T_W_C = solve(*s.reference);
     }
@@ -385,7 +394,7 @@ TrackingResult Tracker::track(const core::Frame& frame, const core::Isometry& in
     if (++s.lost_in_a_row >= config_.lost_frames_before_restart && prepared) {
       // Not found again: a new segment starts at the last good pose. The old keyframes stay,
       // so that a later frame that sees them again brings the map back together.
-      if (makeKeyframe(current, s.T_W_previous)) {
+      if (makeKeyframe(current, s.T_W_previous, frame.timestamp_ns, true)) {
         return accept(TrackingStatus::kRestarted, s.T_W_previous, 0);
       }
     }
@@ -396,7 +405,7 @@ TrackingResult Tracker::track(const core::Frame& frame, const core::Isometry& in
   accept(status, *T_W_C, gap_ns);
   if (T_key_current.translation().norm() > config_.keyframe_translation_m ||
       core::rotationAngleDeg(T_key_current) > config_.keyframe_rotation_deg) {
-    makeKeyframe(current, *T_W_C);
+    makeKeyframe(current, *T_W_C, frame.timestamp_ns, false);
   }
   return result;
 }

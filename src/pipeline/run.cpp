@@ -133,7 +133,12 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
   if (total && options.max_frames) total = std::min(*total, *options.max_frames);
 
   SourceStage source_stage(source, options.max_frames, options.stop);
-  TrackingStage tracking_stage(config.tracker, options.poses);
+  // Loop closure runs on its own thread, fed with the tracker's keyframes.
+  std::unique_ptr<loop::LoopCloser> loop_closer;
+  if (config.loop_closure.enabled && options.poses == PoseSource::kTrack) {
+    loop_closer = std::make_unique<loop::LoopCloser>(config.loop_closure);
+  }
+  TrackingStage tracking_stage(config.tracker, options.poses, loop_closer.get());
   IntegrationStage integration_stage(config.tsdf, threads, options.holdout_every);
   planes::PlaneAlignmentConfig alignment = config.pose_correction;
   alignment.enabled = alignment.enabled && options.poses == PoseSource::kTrack;
@@ -192,6 +197,18 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
   summary.wall_s = wall_s;
   summary.fps = wall_s > 0.0 ? static_cast<double>(summary.frames) / wall_s : 0.0;
   summary.ate = eval::absoluteTrajectoryError(sink.estimate(), sink.groundTruth());
+  if (loop_closer) {
+    loop_closer->finish();
+    const loop::LoopGraph& graph = loop_closer->graph();
+    summary.loop_closure = true;
+    summary.loops = graph.stats();
+    const eval::Trajectory closed = graph.correct(sink.estimate());
+    eval::writeTumTrajectory(closed, options.out_dir / "trajectory_closed.txt");
+    summary.ate_after_closure = eval::absoluteTrajectoryError(closed, sink.groundTruth());
+    spdlog::info("loop closure: {} keyframes, {} loops closed, {} rejected, pose graph {:.0f} ms",
+                 summary.loops.keyframes, summary.loops.loop_closures, summary.loops.rejected(),
+                 summary.loops.pose_graph_ms);
+  }
   summary.tsdf_bytes = integration_stage.map().memoryBytes();
   summary.tsdf_blocks_released = integration_stage.blocksReleased();
   summary.stages = {figures("source", source_stage.timer()),
@@ -288,6 +305,20 @@ void writeReport(const RunSummary& summary, const std::filesystem::path& path) {
   report["ate_m"] = summary.ate ? json(summary.ate->rmse_m) : json(nullptr);
   report["ate_max_m"] = summary.ate ? json(summary.ate->max_m) : json(nullptr);
   report["ate_pairs"] = summary.ate ? summary.ate->pairs : 0;
+  report["loop_closure"] = summary.loop_closure;
+  report["keyframes"] = summary.loops.keyframes;
+  report["loop_closures"] = summary.loops.loop_closures;
+  report["loop_closures_rejected"] = summary.loops.rejected();
+  report["loop_candidates_checked"] = summary.loops.candidates_checked;
+  report["loop_revisits_verified"] = summary.loops.revisits_verified;
+  report["loops_rejected_as_drift"] = summary.loops.rejected_as_drift;
+  report["loops_rejected_unconfirmed"] = summary.loops.rejected_unconfirmed;
+  report["loops_rejected_by_graph"] = summary.loops.rejected_by_graph;
+  report["pose_graph_optimisations"] = summary.loops.optimisations;
+  report["pose_graph_ms"] = summary.loops.pose_graph_ms;
+  report["loop_keyframe_ms"] = summary.loops.keyframe_ms;
+  report["ate_after_closure_m"] =
+      summary.ate_after_closure ? json(summary.ate_after_closure->rmse_m) : json(nullptr);
   // View PSNR needs the captured frames again: `tessera eval RUN_DIR --frames SOURCE` fills it.
   for (const char* key : {"view_psnr_mean", "view_psnr_baseline_mean", "view_psnr_holdout_mean",
                           "view_psnr_baseline_holdout_mean", "view_pixels"}) {

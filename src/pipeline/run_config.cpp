@@ -22,6 +22,8 @@ RunConfig readRunConfig(const core::ConfigDocument& doc) {
     readConfig(root.section("pipeline"), config.pipeline);
     fusion::readConfig(root.section("tracker"), config.tracker);
     fusion::readConfig(root.section("tracker_features"), config.tracker.features);
+    loop::readConfig(root.section("loop_closure"), config.loop_closure);
+    fusion::readConfig(root.section("loop_features"), config.loop_closure.features);
     fusion::readConfig(root.section("tsdf"), config.tsdf);
     planes::readConfig(root.section("planes"), config.planes);
     planes::readConfig(root.section("patches"), config.patches);

@@ -81,8 +81,9 @@ std::optional<core::Frame> SourceStage::read() {
   return std::nullopt;
 }
 
-TrackingStage::TrackingStage(const fusion::TrackerConfig& tracker, PoseSource poses)
-    : tracker_(tracker), poses_(poses) {}
+TrackingStage::TrackingStage(const fusion::TrackerConfig& tracker, PoseSource poses,
+                             loop::LoopCloser* loop_closer)
+    : tracker_(tracker), poses_(poses), loop_closer_(loop_closer) {}
 
 std::optional<core::Isometry> TrackingStage::poseOf(const core::Frame& frame,
                                                     std::string& problem) {
@@ -98,6 +99,9 @@ std::optional<core::Isometry> TrackingStage::poseOf(const core::Frame& frame,
     ++tracking_losses_;
     problem = "tracking lost: " + tracked.problem;
     return std::nullopt;
+  }
+  if (loop_closer_) {
+    for (const auto& keyframe : tracked.new_keyframes) loop_closer_->add(keyframe);
   }
   if (tracked.from_features) ++feature_poses_;
   if (tracked.status == fusion::TrackingStatus::kRelocalised) {

@@ -4,6 +4,7 @@
 // constant-velocity guess. Across large motions (a gap in time, a failed solve) the guess
 // comes from features (ORB, 3D-2D PnP against the keyframe); after a loss or an interrupted
 // source the frame is relocalised against recent keyframes before tracking goes on.
+#include <cstdint>
 #include <memory>
 #include <string>
 #include <vector>
@@ -24,7 +25,8 @@ struct TrackerConfig {
   double max_rotation_deg = 15.0;
   int lost_frames_before_restart = 10;  // then tracking restarts from the current frame
   // Gauss-Newton iterations per pyramid level, finest level first; the level count follows.
-  std::vector<int> iterations_per_level = {2, 3, 4};
+  // {2, 3, 4} lost the loop scene's corridor at its start; {4, 4, 6} tracks it (docs/SCENES.md).
+  std::vector<int> iterations_per_level = {4, 4, 6};
   // Odometry runs on blocks of N x N pixels: 2 tracks 640x480 frames at 320x240, a quarter of
   // the work (grey and depth averaged over each block, depth not across an edge).
   int tracking_scale = 2;
@@ -49,11 +51,25 @@ void readConfig(const core::ConfigSection& section, TrackerConfig& config);
 // kRestarted: not found again; a new segment starts at the last good pose.
 enum class TrackingStatus { kFirst, kTracked, kLost, kRelocalised, kRestarted };
 
+// A keyframe as the tracker made it, for place recognition and the pose graph (loop closure):
+// its pose as tracked, its features, and its depth in metres (NaN where missing).
+struct KeyframeRecord {
+  std::int64_t timestamp_ns = 0;
+  core::Isometry T_W_C = core::Isometry::Identity();
+  FeatureFrame features;
+  cv::Mat depth_m;  // CV_32FC1 at the frame's size; shared with the tracker, not to be written
+  core::Intrinsics intrinsics;
+  // Tracking restarted here after a loss: its pose does not follow from the keyframe before.
+  bool starts_segment = false;
+};
+
 struct TrackingResult {
   TrackingStatus status = TrackingStatus::kFirst;
   core::Isometry T_W_C = core::Isometry::Identity();  // valid unless kLost
   bool from_features = false;                         // the solve started from a feature pose
   std::string problem;                                // why tracking was lost
+  // Keyframes made while tracking this frame (the last tracked frame may become one too).
+  std::vector<std::shared_ptr<const KeyframeRecord>> new_keyframes;
 };
 
 // Not thread-safe: owned by the fusion stage, which runs serially.

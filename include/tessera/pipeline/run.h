@@ -8,6 +8,7 @@
 
 #include "tessera/core/frame_source.h"
 #include "tessera/eval/trajectory.h"
+#include "tessera/loop/loop_graph.h"
 #include "tessera/pipeline/run_config.h"
 #include "tessera/pipeline/stages.h"
 
@@ -96,6 +97,11 @@ struct RunSummary {
   std::optional<double> match_ms_p50;
   // ATE of the fused poses against the recording's ground truth, when it has one.
   std::optional<eval::AteResult> ate;
+  // Loop closure (tracked poses only): what it found, and the ATE of the corrected trajectory
+  // (OUT/trajectory_closed.txt); `ate` stays that of the poses the map was fused at.
+  bool loop_closure = false;
+  loop::LoopStats loops;
+  std::optional<eval::AteResult> ate_after_closure;
   std::vector<StageFigures> stages;
 };
 

@@ -6,6 +6,7 @@
 #include "tessera/core/config.h"
 #include "tessera/fusion/tracker.h"
 #include "tessera/fusion/tsdf_map.h"
+#include "tessera/loop/loop_config.h"
 #include "tessera/match/match_cascade.h"
 #include "tessera/pattern/pattern_config.h"
 #include "tessera/planes/patch_map.h"
@@ -27,6 +28,7 @@ void readConfig(const core::ConfigSection& section, PipelineConfig& config);
 struct RunConfig {
   PipelineConfig pipeline;
   fusion::TrackerConfig tracker;
+  loop::LoopConfig loop_closure;
   fusion::TsdfConfig tsdf;
   planes::PlaneDetectorConfig planes;
   planes::PatchMapConfig patches;

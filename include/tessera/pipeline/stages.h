@@ -17,6 +17,7 @@
 #include "tessera/eval/trajectory.h"
 #include "tessera/fusion/tracker.h"
 #include "tessera/fusion/tsdf_map.h"
+#include "tessera/loop/loop_closer.h"
 #include "tessera/pipeline/stage_timer.h"
 #include "tessera/planes/frame_sharpness.h"
 #include "tessera/planes/patch_export.h"
@@ -109,7 +110,10 @@ struct FusedFrame {
 // frame whose tracking is lost gets no pose, so it cannot corrupt the map.
 class TrackingStage {
  public:
-  TrackingStage(const fusion::TrackerConfig& tracker, PoseSource poses);
+  // `loop_closer`, when given, receives the tracker's keyframes (it closes loops off the frame
+  // path).
+  TrackingStage(const fusion::TrackerConfig& tracker, PoseSource poses,
+                loop::LoopCloser* loop_closer = nullptr);
 
   TrackedFrame process(core::Frame frame);
 
@@ -124,6 +128,7 @@ class TrackingStage {
 
   fusion::Tracker tracker_;
   PoseSource poses_;
+  loop::LoopCloser* loop_closer_;
   std::size_t tracking_losses_ = 0;
   std::size_t tracking_restarts_ = 0;
   std::size_t relocalisations_ = 0;  // found again after a loss or an interrupted source

@@ -1,0 +1,102 @@
+#pragma once
+// Loop closure over the tracker's keyframes: each new keyframe is looked up among the earlier
+// ones (place recognition), a candidate is checked geometrically (revisit.h), and an accepted
+// revisit becomes a loop edge of the pose graph, which is then optimised. The corrected poses
+// move every tracked pose with its keyframe.
+//
+// A revisit is accepted only when (1) the correction it implies is one that drift could
+// explain (max_drift_*), and (2) another revisit within a few keyframes implies the same
+// correction. The pose graph's line process then prunes loops that still disagree.
+//
+// Thread-safety: none; loop_closer.h runs it on a worker thread.
+#include <cstddef>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "tessera/eval/trajectory.h"
+#include "tessera/fusion/tracker.h"
+#include "tessera/loop/loop_config.h"
+#include "tessera/loop/place_index.h"
+#include "tessera/loop/pose_graph.h"
+#include "tessera/loop/revisit.h"
+
+namespace tessera::loop {
+
+struct LoopEdge {
+  int match = -1;  // the earlier keyframe
+  int query = -1;  // the keyframe that came back to it
+  Revisit revisit;
+  bool kept = false;  // in the graph after the last optimisation
+};
+
+struct LoopStats {
+  std::size_t keyframes = 0;
+  std::size_t candidates_checked = 0;    // place-recognition candidates checked geometrically
+  std::size_t revisits_verified = 0;     // of those, the ones features and ICP confirmed
+  std::size_t rejected_as_drift = 0;     // implied a correction drift cannot explain
+  std::size_t rejected_unconfirmed = 0;  // no second revisit agreed in time
+  std::size_t rejected_by_graph = 0;     // pruned by the line process
+  std::size_t loop_closures = 0;         // loop edges in the optimised graph
+  std::size_t optimisations = 0;
+  double pose_graph_ms = 0.0;  // all optimisations together
+  double keyframe_ms = 0.0;    // all keyframes' work together, optimisations included
+  double information_ms = 0.0;   // odometry edges' information matrices
+  double place_lookup_ms = 0.0;  // place recognition
+  double verification_ms = 0.0;  // geometric checks of candidates
+  std::size_t rejected() const {
+    return rejected_as_drift + rejected_unconfirmed + rejected_by_graph;
+  }
+};
+
+class LoopGraph {
+ public:
+  explicit LoopGraph(const LoopConfig& config);
+
+  // Adds the tracker's next keyframe and closes the loops it finds.
+  void add(const fusion::KeyframeRecord& record);
+
+  // Re-optimises when loops were added since the last optimisation (end of a run).
+  void finish();
+
+  // `trajectory` (tracked poses) moved with the corrections of their keyframes: each pose
+  // follows the last keyframe taken at or before it.
+  eval::Trajectory correct(const eval::Trajectory& trajectory) const;
+
+  const LoopStats& stats() const { return stats_; }
+  const std::vector<LoopEdge>& loops() const { return loops_; }
+  // Per keyframe, its pose after the last optimisation.
+  const std::vector<core::Isometry>& correctedPoses() const { return corrected_; }
+  const std::vector<KeyframeView>& keyframes() const { return keyframes_; }
+
+ private:
+  struct Pending {
+    int query = -1;
+    int match = -1;
+    Revisit revisit;
+  };
+  // The pose of `query` that `revisit` from `match` implies, from match's corrected pose.
+  core::Isometry impliedPose(int match, int query, const Revisit& revisit) const;
+  bool withinDrift(int match, int query, const Revisit& revisit) const;
+  // Whether the two keyframes' corrected positions are near enough to see one place.
+  bool withinView(int match, int query) const;
+  bool agree(const Pending& a, const Pending& b) const;
+  void acceptLoop(const Pending& loop);
+  void optimise();
+
+  LoopConfig config_;
+  PlaceIndex index_;
+  std::vector<KeyframeView> keyframes_;
+  std::vector<core::Isometry> corrected_;
+  // The graph's nodes (keyframe ids, ascending), each keyframe's node (the last at or before
+  // it) and the odometry edges between consecutive nodes.
+  std::vector<int> nodes_;
+  std::vector<std::size_t> node_of_;
+  std::vector<GraphEdge> odometry_;
+  std::vector<LoopEdge> loops_;
+  std::vector<Pending> pending_;
+  bool dirty_ = false;  // loops added since the last optimisation
+  LoopStats stats_;
+};
+
+}  // namespace tessera::loop

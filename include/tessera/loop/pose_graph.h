@@ -1,0 +1,34 @@
+#pragma once
+// The pose graph of the keyframes, optimised with Open3D's global optimisation
+// (Levenberg-Marquardt with a line process on the loop edges, which prunes loops that
+// disagree with the rest of the graph).
+//
+// Thread-safety: a pure function of its arguments.
+#include <vector>
+
+#include "tessera/core/pose.h"
+#include "tessera/loop/revisit.h"
+
+namespace tessera::loop {
+
+struct GraphEdge {
+  int source = 0;  // node indices
+  int target = 0;
+  core::Isometry T_target_source = core::Isometry::Identity();
+  Matrix6d information = Matrix6d::Identity();
+  bool loop = false;  // a revisit (may be pruned) rather than odometry (kept)
+};
+
+struct GraphSolution {
+  std::vector<core::Isometry> T_W_C;  // per node, the first node kept where it was
+  std::vector<bool> loop_kept;        // per loop edge, in the order given
+  double ms = 0.0;
+};
+
+// Optimises the node poses `T_W_C` (their initial values) under `edges`. Loop edges whose
+// line-process weight ends below `edge_prune_threshold` are pruned and reported as not kept.
+GraphSolution optimisePoseGraph(const std::vector<core::Isometry>& T_W_C,
+                                const std::vector<GraphEdge>& edges,
+                                double edge_prune_threshold);
+
+}  // namespace tessera::loop

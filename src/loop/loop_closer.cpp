@@ -1,0 +1,63 @@
+#include "tessera/loop/loop_closer.h"
+
+#include <sys/resource.h>
+#include <sys/syscall.h>
+#include <unistd.h>
+
+#include <exception>
+
+#include <spdlog/spdlog.h>
+
+namespace tessera::loop {
+
+LoopCloser::LoopCloser(const LoopConfig& config)
+    : graph_(config), worker_([this] { work(); }) {}
+
+LoopCloser::~LoopCloser() { finish(); }
+
+void LoopCloser::add(std::shared_ptr<const fusion::KeyframeRecord> keyframe) {
+  {
+    const std::lock_guard<std::mutex> lock(mutex_);
+    if (finishing_) return;
+    queue_.push_back(std::move(keyframe));
+  }
+  wake_.notify_one();
+}
+
+void LoopCloser::finish() {
+  {
+    const std::lock_guard<std::mutex> lock(mutex_);
+    finishing_ = true;
+  }
+  wake_.notify_one();
+  if (worker_.joinable()) worker_.join();
+}
+
+void LoopCloser::work() {
+  // The lowest scheduling priority (Linux nices threads one by one): loop closure takes the
+  // CPU the frame path leaves, and catches up at the end of the stream if it must.
+  setpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid)), 19);
+  for (;;) {
+    std::shared_ptr<const fusion::KeyframeRecord> next;
+    {
+      std::unique_lock<std::mutex> lock(mutex_);
+      wake_.wait(lock, [this] { return finishing_ || !queue_.empty(); });
+      if (queue_.empty()) break;  // finishing, and nothing left
+      next = std::move(queue_.front());
+      queue_.pop_front();
+    }
+    try {
+      graph_.add(*next);
+    } catch (const std::exception& e) {
+      // A keyframe loop closure cannot use costs its loops, never the run.
+      spdlog::warn("loop closure: keyframe at {} ns skipped: {}", next->timestamp_ns, e.what());
+    }
+  }
+  try {
+    graph_.finish();
+  } catch (const std::exception& e) {
+    spdlog::warn("loop closure: the final optimisation failed: {}", e.what());
+  }
+}
+
+}  // namespace tessera::loop

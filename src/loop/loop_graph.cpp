@@ -1,0 +1,267 @@
+#include "tessera/loop/loop_graph.h"
+
+#include <algorithm>
+#include <chrono>
+#include <numeric>
+
+#include <spdlog/spdlog.h>
+
+namespace tessera::loop {
+
+namespace {
+
+double msSince(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+}
+
+// Odometry across a tracking restart says nothing about the motion: the edge is kept only so
+// that the graph stays connected, with this weight.
+constexpr double kRestartEdgeWeight = 1e-6;
+
+double translationBetween(const core::Isometry& a, const core::Isometry& b) {
+  return (a.translation() - b.translation()).norm();
+}
+
+// The descriptors of the `count` keypoints with the strongest response.
+cv::Mat strongest(const fusion::FeatureFrame& features, int count) {
+  if (features.descriptors.rows <= count) return features.descriptors;
+  std::vector<int> order(features.keypoints.size());
+  std::iota(order.begin(), order.end(), 0);
+  std::partial_sort(order.begin(), order.begin() + count, order.end(), [&](int a, int b) {
+    return features.keypoints[static_cast<std::size_t>(a)].response >
+           features.keypoints[static_cast<std::size_t>(b)].response;
+  });
+  cv::Mat out(count, features.descriptors.cols, features.descriptors.type());
+  for (int i = 0; i < count; ++i) {
+    features.descriptors.row(order[static_cast<std::size_t>(i)]).copyTo(out.row(i));
+  }
+  return out;
+}
+
+}  // namespace
+
+LoopGraph::LoopGraph(const LoopConfig& config) : config_(config) {}
+
+core::Isometry LoopGraph::impliedPose(int match, int /*query*/, const Revisit& revisit) const {
+  return corrected_[static_cast<std::size_t>(match)] * revisit.T_query_match.inverse();
+}
+
+bool LoopGraph::withinDrift(int match, int query, const Revisit& revisit) const {
+  const KeyframeView& q = keyframes_[static_cast<std::size_t>(query)];
+  const KeyframeView& m = keyframes_[static_cast<std::size_t>(match)];
+  const double travel = q.travel_m - m.travel_m;
+  const core::Isometry implied = impliedPose(match, query, revisit);
+  const core::Isometry& now = corrected_[static_cast<std::size_t>(query)];
+  return translationBetween(implied, now) <= config_.max_drift_m + config_.max_drift_fraction * travel &&
+         core::rotationAngleDeg(now.inverse() * implied) <=
+             config_.max_drift_deg + config_.max_drift_deg_per_m * travel;
+}
+
+bool LoopGraph::withinView(int match, int query) const {
+  const double travel = keyframes_[static_cast<std::size_t>(query)].travel_m -
+                        keyframes_[static_cast<std::size_t>(match)].travel_m;
+  return translationBetween(corrected_[static_cast<std::size_t>(match)],
+                            corrected_[static_cast<std::size_t>(query)]) <=
+         config_.max_view_distance_m + config_.max_drift_m + config_.max_drift_fraction * travel;
+}
+
+bool LoopGraph::agree(const Pending& a, const Pending& b) const {
+  // The motion between the two queries as the two loops imply it, against odometry's.
+  const core::Isometry via_loops =
+      impliedPose(a.match, a.query, a.revisit).inverse() * impliedPose(b.match, b.query, b.revisit);
+  const core::Isometry via_odometry = corrected_[static_cast<std::size_t>(a.query)].inverse() *
+                                      corrected_[static_cast<std::size_t>(b.query)];
+  const core::Isometry difference = via_odometry.inverse() * via_loops;
+  return difference.translation().norm() <= config_.consistency_m &&
+         core::rotationAngleDeg(difference) <= config_.consistency_deg;
+}
+
+void LoopGraph::add(const fusion::KeyframeRecord& record) {
+  const auto start = std::chrono::steady_clock::now();
+  KeyframeView key;
+  key.id = static_cast<int>(keyframes_.size());
+  key.timestamp_ns = record.timestamp_ns;
+  key.T_W_C = record.T_W_C;
+  key.features = record.features;
+  key.intrinsics = record.intrinsics;
+  key.depth_m = strideDepth(record.depth_m, config_.dense_stride);
+  key.starts_segment = record.starts_segment || keyframes_.empty();
+  if (keyframes_.empty()) {
+    corrected_.push_back(record.T_W_C);
+  } else {
+    const KeyframeView& previous = keyframes_.back();
+    const core::Isometry step = previous.T_W_C.inverse() * record.T_W_C;  // previous <- key
+    key.travel_m = previous.travel_m + (key.starts_segment ? 0.0 : step.translation().norm());
+    corrected_.push_back(corrected_.back() * step);
+  }
+  // A new node after enough path or turn since the last one, and at each segment start.
+  bool node = nodes_.empty() || key.starts_segment;
+  if (!node) {
+    const KeyframeView& last = keyframes_[static_cast<std::size_t>(nodes_.back())];
+    node = key.travel_m - last.travel_m >= config_.node_spacing_m ||
+           core::rotationAngleDeg(last.T_W_C.inverse() * key.T_W_C) >= config_.node_spacing_deg;
+  }
+  if (node && !nodes_.empty()) {
+    const KeyframeView& last = keyframes_[static_cast<std::size_t>(nodes_.back())];
+    GraphEdge edge;
+    edge.source = static_cast<int>(nodes_.size()) - 1;
+    edge.target = static_cast<int>(nodes_.size());
+    edge.T_target_source = key.T_W_C.inverse() * last.T_W_C;
+    edge.information = key.starts_segment
+                           ? Matrix6d(Matrix6d::Identity() * kRestartEdgeWeight)
+                           : edgeInformation(last, key, edge.T_target_source, config_);
+    odometry_.push_back(edge);
+    stats_.information_ms += msSince(start);
+  }
+  if (node) nodes_.push_back(key.id);
+  node_of_.push_back(nodes_.size() - 1);
+  keyframes_.push_back(std::move(key));
+  const KeyframeView& query = keyframes_.back();
+
+  // Candidates: keyframes at least min_travel_m of path behind.
+  const auto last_far = std::upper_bound(
+      keyframes_.begin(), keyframes_.end(), query.travel_m - config_.min_travel_m,
+      [](double travel, const KeyframeView& k) { return travel < k.travel_m; });
+  PlaceQuery place;
+  place.max_distance = config_.max_descriptor_distance;
+  place.neighbours = config_.neighbours_per_descriptor;
+  place.min_votes = config_.min_votes;
+  place.max_candidates = config_.candidates_per_query;
+  place.newest_allowed = static_cast<int>(last_far - keyframes_.begin()) - 1;
+  const auto lookup_start = std::chrono::steady_clock::now();
+  std::vector<PlaceCandidate> candidates;
+  if (place.newest_allowed >= 0) {
+    candidates = index_.query(strongest(query.features, config_.query_descriptors), place);
+  }
+  index_.add(query.id, query.features.descriptors);
+  stats_.place_lookup_ms += msSince(lookup_start);
+
+  for (const PlaceCandidate& candidate : candidates) {
+    if (!withinView(candidate.keyframe, query.id)) continue;
+    ++stats_.candidates_checked;
+    std::string why;
+    const auto verify_start = std::chrono::steady_clock::now();
+    const auto revisit =
+        verifyRevisit(keyframes_[static_cast<std::size_t>(candidate.keyframe)], query, config_, why);
+    stats_.verification_ms += msSince(verify_start);
+    if (!revisit) continue;
+    ++stats_.revisits_verified;
+    if (!withinDrift(candidate.keyframe, query.id, *revisit)) {
+      ++stats_.rejected_as_drift;
+      spdlog::debug("loop: keyframe {} -> {} rejected: more correction than drift explains",
+                         query.id, candidate.keyframe);
+      continue;
+    }
+    const Pending loop{query.id, candidate.keyframe, *revisit};
+    bool confirmed = false;
+    for (Pending& earlier : pending_) {
+      if (earlier.query == query.id || !agree(earlier, loop)) continue;
+      if (earlier.match >= 0) acceptLoop(earlier);
+      earlier.match = -1;  // accepted: not to be counted as unconfirmed
+      confirmed = true;
+    }
+    if (confirmed) {
+      acceptLoop(loop);
+    } else {
+      pending_.push_back(loop);
+    }
+    break;  // one revisit per keyframe
+  }
+  // Pending revisits that no later one confirmed in time.
+  const auto expired = [&](const Pending& p) {
+    return query.id - p.query > config_.confirm_within_keyframes;
+  };
+  for (const Pending& p : pending_) {
+    if (expired(p) && p.match >= 0) ++stats_.rejected_unconfirmed;
+  }
+  pending_.erase(std::remove_if(pending_.begin(), pending_.end(), expired), pending_.end());
+  pending_.erase(std::remove_if(pending_.begin(), pending_.end(),
+                                [](const Pending& p) { return p.match < 0; }),
+                 pending_.end());
+  ++stats_.keyframes;
+  if (dirty_) optimise();
+  stats_.keyframe_ms += msSince(start);
+}
+
+void LoopGraph::acceptLoop(const Pending& loop) {
+  const core::Isometry implied = impliedPose(loop.match, loop.query, loop.revisit);
+  const core::Isometry& now = corrected_[static_cast<std::size_t>(loop.query)];
+  // The graph is re-optimised when this loop pulls its query away from where it is now.
+  if (stats_.optimisations == 0 || translationBetween(implied, now) > config_.reoptimise_m) {
+    dirty_ = true;
+  }
+  loops_.push_back({loop.match, loop.query, loop.revisit, false});
+}
+
+void LoopGraph::finish() {
+  const bool unsolved = std::any_of(loops_.begin(), loops_.end(),
+                                    [](const LoopEdge& loop) { return !loop.kept; });
+  if (dirty_ || unsolved) optimise();
+}
+
+void LoopGraph::optimise() {
+  // Node poses as tracked; a loop between two keyframes becomes an edge between their nodes,
+  // carried over by the tracked motion from each node to its keyframe.
+  const auto nodePose = [&](int keyframe) -> const core::Isometry& {
+    const int node = nodes_[node_of_[static_cast<std::size_t>(keyframe)]];
+    return keyframes_[static_cast<std::size_t>(node)].T_W_C;
+  };
+  const auto keyPose = [&](int keyframe) -> const core::Isometry& {
+    return keyframes_[static_cast<std::size_t>(keyframe)].T_W_C;
+  };
+  std::vector<GraphEdge> edges = odometry_;
+  for (const LoopEdge& loop : loops_) {
+    GraphEdge edge;
+    edge.source = static_cast<int>(node_of_[static_cast<std::size_t>(loop.match)]);
+    edge.target = static_cast<int>(node_of_[static_cast<std::size_t>(loop.query)]);
+    edge.T_target_source = nodePose(loop.query).inverse() * keyPose(loop.query) *
+                           loop.revisit.T_query_match * keyPose(loop.match).inverse() *
+                           nodePose(loop.match);
+    edge.information = loop.revisit.information;
+    edge.loop = true;
+    edges.push_back(edge);
+  }
+  // From the tracked poses each time, so that a pruned loop leaves no trace.
+  std::vector<core::Isometry> initial;
+  initial.reserve(nodes_.size());
+  for (const int node : nodes_) initial.push_back(keyPose(node));
+  const GraphSolution solution = optimisePoseGraph(initial, edges, config_.edge_prune_threshold);
+  ++stats_.optimisations;
+  stats_.pose_graph_ms += solution.ms;
+  for (std::size_t k = 0; k < keyframes_.size(); ++k) {
+    const std::size_t node = node_of_[k];
+    corrected_[k] = solution.T_W_C[node] * keyPose(nodes_[node]).inverse() * keyframes_[k].T_W_C;
+  }
+  std::vector<LoopEdge> kept;
+  for (std::size_t i = 0; i < loops_.size(); ++i) {
+    if (solution.loop_kept[i]) {
+      loops_[i].kept = true;
+      kept.push_back(loops_[i]);
+    } else {
+      ++stats_.rejected_by_graph;
+      spdlog::info("loop: keyframe {} -> {} pruned by the pose graph", loops_[i].query,
+                   loops_[i].match);
+    }
+  }
+  loops_ = std::move(kept);
+  stats_.loop_closures = loops_.size();
+  dirty_ = false;
+}
+
+eval::Trajectory LoopGraph::correct(const eval::Trajectory& trajectory) const {
+  eval::Trajectory out;
+  std::size_t anchor = 0;
+  for (const auto& [timestamp_ns, T_W_C] : trajectory) {
+    while (anchor + 1 < keyframes_.size() && keyframes_[anchor + 1].timestamp_ns <= timestamp_ns) {
+      ++anchor;
+    }
+    if (keyframes_.empty()) {
+      out[timestamp_ns] = T_W_C;
+      continue;
+    }
+    out[timestamp_ns] = corrected_[anchor] * keyframes_[anchor].T_W_C.inverse() * T_W_C;
+  }
+  return out;
+}
+
+}  // namespace tessera::loop
