@@ -21,6 +21,7 @@ void readConfig(const core::ConfigSection& section, LoopConfig& config) {
   section.read("consistency_m", config.consistency_m);
   section.read("consistency_deg", config.consistency_deg);
   section.read("dense_stride", config.dense_stride);
+  section.read("dense_max_depth_m", config.dense_max_depth_m);
   section.read("icp_distance_m", config.icp_distance_m);
   section.read("min_fitness", config.min_fitness);
   section.read("max_icp_rmse_m", config.max_icp_rmse_m);
@@ -31,7 +32,7 @@ void readConfig(const core::ConfigSection& section, LoopConfig& config) {
   if (config.min_travel_m < 0.0 || config.max_descriptor_distance < 0 ||
       config.neighbours_per_descriptor < 1 || config.min_votes < 1 ||
       config.candidates_per_query < 1 || config.query_descriptors < 1 || config.confirm_within_keyframes < 0 ||
-      config.dense_stride < 1 || config.icp_distance_m <= 0.0 || config.min_fitness < 0.0 ||
+      config.dense_stride < 1 || config.icp_distance_m <= 0.0 || config.dense_max_depth_m <= 0.0 || config.min_fitness < 0.0 ||
       config.min_fitness > 1.0 || config.edge_prune_threshold < 0.0 ||
       config.edge_prune_threshold > 1.0 || config.node_spacing_m < 0.0 ||
       config.node_spacing_deg < 0.0) {

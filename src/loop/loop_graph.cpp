@@ -22,22 +22,6 @@ double translationBetween(const core::Isometry& a, const core::Isometry& b) {
   return (a.translation() - b.translation()).norm();
 }
 
-// The descriptors of the `count` keypoints with the strongest response.
-cv::Mat strongest(const fusion::FeatureFrame& features, int count) {
-  if (features.descriptors.rows <= count) return features.descriptors;
-  std::vector<int> order(features.keypoints.size());
-  std::iota(order.begin(), order.end(), 0);
-  std::partial_sort(order.begin(), order.begin() + count, order.end(), [&](int a, int b) {
-    return features.keypoints[static_cast<std::size_t>(a)].response >
-           features.keypoints[static_cast<std::size_t>(b)].response;
-  });
-  cv::Mat out(count, features.descriptors.cols, features.descriptors.type());
-  for (int i = 0; i < count; ++i) {
-    features.descriptors.row(order[static_cast<std::size_t>(i)]).copyTo(out.row(i));
-  }
-  return out;
-}
-
 }  // namespace
 
 LoopGraph::LoopGraph(const LoopConfig& config) : config_(config) {}
@@ -46,23 +30,28 @@ core::Isometry LoopGraph::impliedPose(int match, int /*query*/, const Revisit& r
   return corrected_[static_cast<std::size_t>(match)] * revisit.T_query_match.inverse();
 }
 
+double LoopGraph::travelBetween(int match, int query) const {
+  return keyframes_[static_cast<std::size_t>(query)].travel_m -
+         keyframes_[static_cast<std::size_t>(match)].travel_m;
+}
+
+double LoopGraph::driftBound(int match, int query) const {
+  return config_.max_drift_m + config_.max_drift_fraction * travelBetween(match, query);
+}
+
 bool LoopGraph::withinDrift(int match, int query, const Revisit& revisit) const {
-  const KeyframeView& q = keyframes_[static_cast<std::size_t>(query)];
-  const KeyframeView& m = keyframes_[static_cast<std::size_t>(match)];
-  const double travel = q.travel_m - m.travel_m;
+  const double travel = travelBetween(match, query);
   const core::Isometry implied = impliedPose(match, query, revisit);
   const core::Isometry& now = corrected_[static_cast<std::size_t>(query)];
-  return translationBetween(implied, now) <= config_.max_drift_m + config_.max_drift_fraction * travel &&
+  return translationBetween(implied, now) <= driftBound(match, query) &&
          core::rotationAngleDeg(now.inverse() * implied) <=
              config_.max_drift_deg + config_.max_drift_deg_per_m * travel;
 }
 
 bool LoopGraph::withinView(int match, int query) const {
-  const double travel = keyframes_[static_cast<std::size_t>(query)].travel_m -
-                        keyframes_[static_cast<std::size_t>(match)].travel_m;
   return translationBetween(corrected_[static_cast<std::size_t>(match)],
                             corrected_[static_cast<std::size_t>(query)]) <=
-         config_.max_view_distance_m + config_.max_drift_m + config_.max_drift_fraction * travel;
+         config_.max_view_distance_m + driftBound(match, query);
 }
 
 bool LoopGraph::agree(const Pending& a, const Pending& b) const {
@@ -131,7 +120,7 @@ void LoopGraph::add(const fusion::KeyframeRecord& record) {
   const auto lookup_start = std::chrono::steady_clock::now();
   std::vector<PlaceCandidate> candidates;
   if (place.newest_allowed >= 0) {
-    candidates = index_.query(strongest(query.features, config_.query_descriptors), place);
+    candidates = index_.query(strongestDescriptors(query.features, config_.query_descriptors), place);
   }
   index_.add(query.id, query.features.descriptors);
   stats_.place_lookup_ms += msSince(lookup_start);
@@ -225,7 +214,13 @@ void LoopGraph::optimise() {
   std::vector<core::Isometry> initial;
   initial.reserve(nodes_.size());
   for (const int node : nodes_) initial.push_back(keyPose(node));
-  const GraphSolution solution = optimisePoseGraph(initial, edges, config_.edge_prune_threshold);
+  // The largest correction any loop may make (its drift bound) sizes the first solve.
+  double drift_distance_m = 0.0;
+  for (const LoopEdge& loop : loops_) {
+    drift_distance_m = std::max(drift_distance_m, driftBound(loop.match, loop.query));
+  }
+  const GraphSolution solution =
+      optimisePoseGraph(initial, edges, config_.edge_prune_threshold, drift_distance_m);
   ++stats_.optimisations;
   stats_.pose_graph_ms += solution.ms;
   for (std::size_t k = 0; k < keyframes_.size(); ++k) {

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <map>
+#include <numeric>
 #include <set>
 
 #include <opencv2/core/hal/hal.hpp>
@@ -53,6 +54,21 @@ void PlaceIndex::add(int id, const cv::Mat& descriptors) {
     batches_.pop_back();
     batches_.back() = std::move(merged);
   }
+}
+
+cv::Mat strongestDescriptors(const fusion::FeatureFrame& features, int count) {
+  if (features.descriptors.rows <= count) return features.descriptors;
+  std::vector<int> order(features.keypoints.size());
+  std::iota(order.begin(), order.end(), 0);
+  std::partial_sort(order.begin(), order.begin() + count, order.end(), [&](int a, int b) {
+    return features.keypoints[static_cast<std::size_t>(a)].response >
+           features.keypoints[static_cast<std::size_t>(b)].response;
+  });
+  cv::Mat out(count, features.descriptors.cols, features.descriptors.type());
+  for (int i = 0; i < count; ++i) {
+    features.descriptors.row(order[static_cast<std::size_t>(i)]).copyTo(out.row(i));
+  }
+  return out;
 }
 
 std::vector<PlaceCandidate> PlaceIndex::query(const cv::Mat& descriptors,

@@ -1,5 +1,6 @@
 #include "tessera/loop/pose_graph.h"
 
+#include <algorithm>
 #include <chrono>
 #include <set>
 #include <utility>
@@ -15,9 +16,24 @@ namespace reg = open3d::pipelines::registration;
 // The distance Open3D's line process scales loop residuals by (its documented default).
 constexpr double kLineProcessDistanceM = 0.075;
 
+namespace {
+
+void solve(reg::PoseGraph& graph, double line_process_distance_m, double edge_prune_threshold) {
+  // Open3D reports each iteration at Info level; tessera's log says what matters.
+  const auto verbosity = open3d::utility::GetVerbosityLevel();
+  open3d::utility::SetVerbosityLevel(open3d::utility::VerbosityLevel::Error);
+  reg::GlobalOptimization(graph, reg::GlobalOptimizationLevenbergMarquardt(),
+                          reg::GlobalOptimizationConvergenceCriteria(),
+                          reg::GlobalOptimizationOption(line_process_distance_m,
+                                                        edge_prune_threshold, 1.0, 0));
+  open3d::utility::SetVerbosityLevel(verbosity);
+}
+
+}  // namespace
+
 GraphSolution optimisePoseGraph(const std::vector<core::Isometry>& T_W_C,
-                                const std::vector<GraphEdge>& edges,
-                                double edge_prune_threshold) {
+                                const std::vector<GraphEdge>& edges, double edge_prune_threshold,
+                                double drift_distance_m) {
   const auto start = std::chrono::steady_clock::now();
   GraphSolution out;
   reg::PoseGraph graph;
@@ -29,14 +45,11 @@ GraphSolution optimisePoseGraph(const std::vector<core::Isometry>& T_W_C,
                               edge.information, edge.loop, 1.0);
   }
   if (T_W_C.size() >= 2) {
-    // Open3D reports each iteration at Info level; tessera's log says what matters.
-    const auto verbosity = open3d::utility::GetVerbosityLevel();
-    open3d::utility::SetVerbosityLevel(open3d::utility::VerbosityLevel::Error);
-    reg::GlobalOptimization(graph, reg::GlobalOptimizationLevenbergMarquardt(),
-                            reg::GlobalOptimizationConvergenceCriteria(),
-                            reg::GlobalOptimizationOption(kLineProcessDistanceM,
-                                                          edge_prune_threshold, 1.0, 0));
-    open3d::utility::SetVerbosityLevel(verbosity);
+    // First solve: the drift-sized distance; its poses start the second, on every edge again.
+    reg::PoseGraph coarse = graph;
+    solve(coarse, std::max(drift_distance_m, kLineProcessDistanceM), edge_prune_threshold);
+    for (std::size_t i = 0; i < graph.nodes_.size(); ++i) graph.nodes_[i] = coarse.nodes_[i];
+    solve(graph, kLineProcessDistanceM, edge_prune_threshold);
   }
   for (const auto& node : graph.nodes_) {
     core::Isometry pose;

@@ -30,14 +30,14 @@ namespace {
 // The keyframe's depth as points in its camera, with normals from their 20 nearest neighbours
 // when asked (point-to-plane ICP's target needs them).
 std::shared_ptr<o3d::geometry::PointCloud> cloudOf(const KeyframeView& key, int stride,
-                                                   bool normals) {
+                                                   double max_depth_m, bool normals) {
   auto cloud = std::make_shared<o3d::geometry::PointCloud>();
   const core::Intrinsics& k = key.intrinsics;
   for (int v = 0; v < key.depth_m.rows; ++v) {
     const float* row = key.depth_m.ptr<float>(v);
     for (int u = 0; u < key.depth_m.cols; ++u) {
       const double z = row[u];
-      if (!std::isfinite(z)) continue;
+      if (!std::isfinite(z) || z > max_depth_m) continue;
       const double px = u * stride, py = v * stride;
       cloud->points_.emplace_back((px - k.cx) * z / k.fx, (py - k.cy) * z / k.fy, z);
     }
@@ -59,8 +59,8 @@ std::optional<Revisit> verifyRevisit(const KeyframeView& match, const KeyframeVi
     why = "features give no pose";
     return std::nullopt;
   }
-  const auto source = cloudOf(match, config.dense_stride, false);
-  const auto target = cloudOf(query, config.dense_stride, true);
+  const auto source = cloudOf(match, config.dense_stride, config.dense_max_depth_m, false);
+  const auto target = cloudOf(query, config.dense_stride, config.dense_max_depth_m, true);
   if (source->points_.size() < 100 || target->points_.size() < 100) {
     why = "too little depth";
     return std::nullopt;
@@ -86,8 +86,8 @@ std::optional<Revisit> verifyRevisit(const KeyframeView& match, const KeyframeVi
 
 Matrix6d edgeInformation(const KeyframeView& source, const KeyframeView& target,
                          const core::Isometry& T_target_source, const LoopConfig& config) {
-  const auto a = cloudOf(source, config.dense_stride, false);
-  const auto b = cloudOf(target, config.dense_stride, false);
+  const auto a = cloudOf(source, config.dense_stride, config.dense_max_depth_m, false);
+  const auto b = cloudOf(target, config.dense_stride, config.dense_max_depth_m, false);
   if (a->points_.empty() || b->points_.empty()) return Matrix6d::Identity();
   return reg::GetInformationMatrixFromPointClouds(*a, *b, config.icp_distance_m,
                                                   T_target_source.matrix());

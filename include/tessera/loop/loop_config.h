@@ -38,6 +38,9 @@ struct LoopConfig {
   // pixel (8: 80 x 60 points of a 640 x 480 frame); accepted when at least min_fitness of the query's points find a partner within
   // icp_distance_m and their rms distance is below max_icp_rmse_m.
   int dense_stride = 8;
+  // Depth beyond this is left out of the dense check: a Kinect's noise there (centimetres at
+  // 4 m, growing with the square of the distance) would swamp the rms.
+  double dense_max_depth_m = 4.0;
   double icp_distance_m = 0.05;
   double min_fitness = 0.3;
   double max_icp_rmse_m = 0.02;

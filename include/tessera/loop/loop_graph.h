@@ -77,6 +77,9 @@ class LoopGraph {
   };
   // The pose of `query` that `revisit` from `match` implies, from match's corrected pose.
   core::Isometry impliedPose(int match, int query, const Revisit& revisit) const;
+  double travelBetween(int match, int query) const;  // camera path between the two, as tracked
+  // The largest correction of the query's position a loop from `match` may make (max_drift_*).
+  double driftBound(int match, int query) const;
   bool withinDrift(int match, int query, const Revisit& revisit) const;
   // Whether the two keyframes' corrected positions are near enough to see one place.
   bool withinView(int match, int query) const;

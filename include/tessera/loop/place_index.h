@@ -16,6 +16,8 @@
 
 #include <opencv2/core.hpp>
 
+#include "tessera/fusion/feature_pose.h"
+
 namespace cv::flann {
 class Index;
 }
@@ -34,6 +36,10 @@ struct PlaceQuery {
   int max_candidates = 3;
   int newest_allowed = -1;  // keyframes with a larger id are not candidates (-1: all)
 };
+
+// The descriptors of the `count` keypoints of `features` with the strongest response (ORB's
+// corner score): a query's votes come from them.
+cv::Mat strongestDescriptors(const fusion::FeatureFrame& features, int count);
 
 class PlaceIndex {
  public:

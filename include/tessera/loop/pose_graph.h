@@ -3,6 +3,12 @@
 // (Levenberg-Marquardt with a line process on the loop edges, which prunes loops that
 // disagree with the rest of the graph).
 //
+// Open3D weighs each loop by its residual at the start, against a distance: a true loop that
+// closes more drift than that distance starts with almost no weight and is pruned. So the graph
+// is solved twice: first with the distance the loops' drift bound allows (the loops that agree
+// pull the graph together; one far off still loses its weight), then from that solution with
+// Open3D's usual 7.5 cm, where a loop that disagrees with the others is pruned.
+//
 // Thread-safety: a pure function of its arguments.
 #include <vector>
 
@@ -27,8 +33,9 @@ struct GraphSolution {
 
 // Optimises the node poses `T_W_C` (their initial values) under `edges`. Loop edges whose
 // line-process weight ends below `edge_prune_threshold` are pruned and reported as not kept.
+// `drift_distance_m` is the first solve's line-process distance (see above).
 GraphSolution optimisePoseGraph(const std::vector<core::Isometry>& T_W_C,
-                                const std::vector<GraphEdge>& edges,
-                                double edge_prune_threshold);
+                                const std::vector<GraphEdge>& edges, double edge_prune_threshold,
+                                double drift_distance_m);
 
 }  // namespace tessera::loop
