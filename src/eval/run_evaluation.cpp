@@ -171,6 +171,14 @@ nlohmann::json evaluateRun(const std::filesystem::path& run_dir,
       writeTumTrajectory(aligned, run_dir / "trajectory_aligned.txt");
     }
   }
+  // Loop closure's corrected poses, when the run closed loops.
+  figures["ate_after_closure_m"] = nullptr;
+  const auto closed_path = run_dir / "trajectory_closed.txt";
+  if (std::filesystem::exists(closed_path)) {
+    if (const auto ate = absoluteTrajectoryError(readTumTrajectory(closed_path), truth_poses)) {
+      figures["ate_after_closure_m"] = ate->rmse_m;
+    }
+  }
   figures["plane_recall"] = nullptr;
   figures["plane_precision"] = nullptr;
   const auto patches_path = run_dir / "patches.json";

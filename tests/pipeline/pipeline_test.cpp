@@ -463,6 +463,34 @@ TEST(RunConfig, DefaultYamlDocumentsEveryKeyWithTheStructDefaults) {
             defaults.pose_correction.points_per_region);
   EXPECT_EQ(from_file.pose_correction.max_step_m, defaults.pose_correction.max_step_m);
   EXPECT_EQ(from_file.pose_correction.max_step_deg, defaults.pose_correction.max_step_deg);
+  const loop::LoopConfig& loop = from_file.loop_closure;
+  const loop::LoopConfig& loop_default = defaults.loop_closure;
+  EXPECT_EQ(loop.enabled, loop_default.enabled);
+  EXPECT_EQ(loop.min_travel_m, loop_default.min_travel_m);
+  EXPECT_EQ(loop.max_descriptor_distance, loop_default.max_descriptor_distance);
+  EXPECT_EQ(loop.neighbours_per_descriptor, loop_default.neighbours_per_descriptor);
+  EXPECT_EQ(loop.min_votes, loop_default.min_votes);
+  EXPECT_EQ(loop.candidates_per_query, loop_default.candidates_per_query);
+  EXPECT_EQ(loop.query_descriptors, loop_default.query_descriptors);
+  EXPECT_EQ(loop.max_view_distance_m, loop_default.max_view_distance_m);
+  EXPECT_EQ(loop.max_drift_fraction, loop_default.max_drift_fraction);
+  EXPECT_EQ(loop.max_drift_m, loop_default.max_drift_m);
+  EXPECT_EQ(loop.max_drift_deg, loop_default.max_drift_deg);
+  EXPECT_EQ(loop.max_drift_deg_per_m, loop_default.max_drift_deg_per_m);
+  EXPECT_EQ(loop.confirm_within_keyframes, loop_default.confirm_within_keyframes);
+  EXPECT_EQ(loop.consistency_m, loop_default.consistency_m);
+  EXPECT_EQ(loop.consistency_deg, loop_default.consistency_deg);
+  EXPECT_EQ(loop.dense_stride, loop_default.dense_stride);
+  EXPECT_EQ(loop.dense_max_depth_m, loop_default.dense_max_depth_m);
+  EXPECT_EQ(loop.icp_distance_m, loop_default.icp_distance_m);
+  EXPECT_EQ(loop.min_fitness, loop_default.min_fitness);
+  EXPECT_EQ(loop.max_icp_rmse_m, loop_default.max_icp_rmse_m);
+  EXPECT_EQ(loop.edge_prune_threshold, loop_default.edge_prune_threshold);
+  EXPECT_EQ(loop.node_spacing_m, loop_default.node_spacing_m);
+  EXPECT_EQ(loop.node_spacing_deg, loop_default.node_spacing_deg);
+  EXPECT_EQ(loop.reoptimise_m, loop_default.reoptimise_m);
+  EXPECT_EQ(loop.features.min_inliers, loop_default.features.min_inliers);
+  EXPECT_EQ(loop.features.ransac_reprojection_px, loop_default.features.ransac_reprojection_px);
 }
 
 TEST(RunConfig, MisspelledKeyAndBadRangeNameTheFile) {
