@@ -208,6 +208,25 @@ std::vector<RunPatch> readPatches(const nlohmann::json& json, const core::Isomet
   return patches;
 }
 
+// How many of the patches (their cells on one plane) overlap a larger one by at least
+// `min_overlap` of their own cells: each such patch covers the plane a second time.
+int countDuplicates(const std::vector<cv::Mat>& cells, double min_overlap) {
+  std::vector<int> counts;
+  for (const cv::Mat& c : cells) counts.push_back(cv::countNonZero(c));
+  int duplicates = 0;
+  for (std::size_t a = 0; a < cells.size(); ++a) {
+    for (std::size_t b = 0; b < cells.size(); ++b) {
+      const bool larger = counts[b] > counts[a] || (counts[b] == counts[a] && b < a);
+      if (a == b || !larger) continue;
+      if (cv::countNonZero(cells[a] & cells[b]) >= min_overlap * counts[a]) {
+        ++duplicates;
+        break;
+      }
+    }
+  }
+  return duplicates;
+}
+
 }  // namespace
 
 PlaneEvaluation evaluatePlanes(const nlohmann::json& truth, const Trajectory& truth_poses,
@@ -235,12 +254,13 @@ PlaneEvaluation evaluatePlanes(const nlohmann::json& truth, const Trajectory& tr
     entry.id = plane.id;
     entry.seen_m2 = cv::countNonZero(plane.seen) * cell_area;
     entry.counted = entry.seen_m2 >= options.min_seen_m2;
+    std::vector<cv::Mat> on_plane;  // cells of each patch within the duplicate bounds
     for (std::size_t i = 0; i < patches.size(); ++i) {
       const RunPatch& patch = patches[i];
       const double cos_angle = std::min(1.0, std::abs(patch.normal_W.dot(plane.plane.normal)));
       const double angle_deg = std::acos(cos_angle) * 180.0 / M_PI;
       const double offset = std::abs(plane.plane.normal.dot(patch.centroid_W) - plane.plane.offset);
-      if (angle_deg > options.max_normal_deg || offset > options.max_offset_m) continue;
+      if (angle_deg > options.duplicate_normal_deg || offset > options.duplicate_offset_m) continue;
       // The patch's cells in this plane's raster.
       cv::Mat covered = cv::Mat::zeros(plane.seen.size(), CV_8UC1);
       for (int r = 0; r < covered.rows; ++r) {
@@ -256,6 +276,8 @@ PlaneEvaluation evaluatePlanes(const nlohmann::json& truth, const Trajectory& tr
       if (covered_cells == 0 || cv::countNonZero(covered & plane.in_polygon) * 2 < covered_cells) {
         continue;
       }
+      on_plane.push_back(covered);
+      if (angle_deg > options.max_normal_deg || offset > options.max_offset_m) continue;
       const int both = cv::countNonZero(covered & plane.seen);
       const int either = cv::countNonZero(covered | plane.seen);
       const double iou = either > 0 ? static_cast<double>(both) / either : 0.0;
@@ -266,6 +288,8 @@ PlaneEvaluation evaluatePlanes(const nlohmann::json& truth, const Trajectory& tr
         entry.offset_error_m = offset;
       }
     }
+    entry.duplicates = countDuplicates(on_plane, options.min_duplicate_overlap);
+    result.duplicate_patches += static_cast<std::size_t>(entry.duplicates);
     if (entry.patch_id >= 0) {
       for (std::size_t i = 0; i < patches.size(); ++i) {
         if (patches[i].id == entry.patch_id) matched[i] = true;

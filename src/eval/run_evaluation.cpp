@@ -56,6 +56,7 @@ void addPlaneFigures(const PlaneEvaluation& planes, nlohmann::json& figures) {
   figures["planes_found"] = planes.planes_found;
   figures["patches_evaluated"] = planes.patches;
   figures["patches_matched"] = planes.patches_matched;
+  figures["duplicate_patches"] = planes.duplicate_patches;
   double worst_normal = 0.0, worst_offset = 0.0, worst_iou = 1.0;
   json per_plane = json::array();
   for (const PlaneResult& p : planes.planes) {
@@ -71,7 +72,8 @@ void addPlaneFigures(const PlaneEvaluation& planes, nlohmann::json& figures) {
                          {"patch", p.patch_id >= 0 ? json(p.patch_id) : json(nullptr)},
                          {"iou", p.iou},
                          {"normal_error_deg", p.normal_error_deg},
-                         {"offset_error_m", p.offset_error_m}});
+                         {"offset_error_m", p.offset_error_m},
+                         {"duplicates", p.duplicates}});
   }
   const bool any = planes.planes_found > 0;
   figures["plane_normal_error_deg_max"] = any ? json(worst_normal) : json(nullptr);
@@ -181,6 +183,7 @@ nlohmann::json evaluateRun(const std::filesystem::path& run_dir,
   }
   figures["plane_recall"] = nullptr;
   figures["plane_precision"] = nullptr;
+  figures["duplicate_patches"] = nullptr;
   const auto patches_path = run_dir / "patches.json";
   if (gt.contains("planes") && std::filesystem::exists(patches_path)) {
     PlaneEvaluation planes;

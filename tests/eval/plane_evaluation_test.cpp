@@ -92,6 +92,27 @@ TEST(PlaneEvaluation, TheTilesOfOnePlaneAreEvaluatedTogether) {
   EXPECT_EQ(apart.patches, 2u);
   EXPECT_DOUBLE_EQ(apart.recall, 0.0);
   EXPECT_DOUBLE_EQ(apart.precision, 0.5);
+  EXPECT_EQ(apart.duplicate_patches, 0u);  // side by side, not over one another
+  EXPECT_EQ(tiles.duplicate_patches, 0u);
+}
+
+// A wall mapped twice, the second time 4 cm off after drift: the second copy covers the same
+// part of the plane again and is a duplicate; the first is still the find.
+TEST(PlaneEvaluation, AWallMappedTwiceAfterDriftCountsOneDuplicate) {
+  const auto twice = evaluatePlanes(
+      truthScene(), onePose(),
+      patches({patch(0, 2.0, -1.0, 1.0, -0.8, 0.8), patch(1, 2.04, -0.9, 0.6, -0.8, 0.8)}),
+      core::Isometry::Identity());
+  EXPECT_EQ(twice.duplicate_patches, 1u);
+  EXPECT_EQ(twice.planes.front().duplicates, 1);
+  EXPECT_DOUBLE_EQ(twice.recall, 1.0);
+  EXPECT_DOUBLE_EQ(twice.precision, 0.5);
+  // Beyond the duplicate bounds (20 cm off) it is another surface, not a copy.
+  const auto apart = evaluatePlanes(
+      truthScene(), onePose(),
+      patches({patch(0, 2.0, -1.0, 1.0, -0.8, 0.8), patch(1, 2.2, -0.9, 0.6, -0.8, 0.8)}),
+      core::Isometry::Identity());
+  EXPECT_EQ(apart.duplicate_patches, 0u);
 }
 
 TEST(PlaneEvaluation, APatchOffByTwoCentimetresOrCoveringHalfIsNotAFind) {

@@ -18,6 +18,12 @@ struct PlaneEvaluationOptions {
   double max_normal_deg = 2.0;  // a patch matches a plane within these bounds...
   double max_offset_m = 0.01;
   double min_iou = 0.8;  // ... and finds it with at least this outline IoU
+  // Duplicates: patches within these looser bounds of one plane (a wall mapped twice after
+  // drift lies centimetres off) whose cells overlap by at least min_duplicate_overlap of the
+  // smaller one cover that plane twice.
+  double duplicate_normal_deg = 10.0;
+  double duplicate_offset_m = 0.15;
+  double min_duplicate_overlap = 0.2;
   double cell_m = 0.05;  // raster of the plane in which seen area and IoU are measured
   int frame_step = 4;    // visibility from every N-th ground-truth pose ...
   int pixel_step = 4;    // ... and every N-th pixel
@@ -32,6 +38,7 @@ struct PlaneResult {
   double iou = 0.0;
   double normal_error_deg = 0.0;
   double offset_error_m = 0.0;
+  int duplicates = 0;  // patches covering part of this plane that another patch covers too
 };
 
 struct PlaneEvaluation {
@@ -41,6 +48,7 @@ struct PlaneEvaluation {
   std::size_t patches_matched = 0;  // the best match of some ground-truth plane
   double recall = 0.0;              // planes_found / planes_counted (0 when none is counted)
   double precision = 0.0;           // patches_matched / patches (0 when there is no patch)
+  std::size_t duplicate_patches = 0;  // summed over the planes
   std::vector<PlaneResult> planes;
 };
 
