@@ -16,10 +16,14 @@ LoopCloser::LoopCloser(const LoopConfig& config)
 LoopCloser::~LoopCloser() { finish(); }
 
 void LoopCloser::add(std::shared_ptr<const fusion::KeyframeRecord> keyframe) {
+  // Queued with its depth already thinned to what the graph keeps (80 x 60 of 640 x 480), so
+  // that a worker far behind holds 19 KB per keyframe rather than the full 1.2 MB image.
+  auto light = std::make_shared<fusion::KeyframeRecord>(*keyframe);
+  light->depth_m = strideDepth(keyframe->depth_m, graph_.config().dense_stride);
   {
     const std::lock_guard<std::mutex> lock(mutex_);
     if (finishing_) return;
-    queue_.push_back(std::move(keyframe));
+    queue_.push_back(std::move(light));
   }
   wake_.notify_one();
 }
@@ -47,7 +51,7 @@ void LoopCloser::work() {
       queue_.pop_front();
     }
     try {
-      graph_.add(*next);
+      graph_.add(*next, true);
     } catch (const std::exception& e) {
       // A keyframe loop closure cannot use costs its loops, never the run.
       spdlog::warn("loop closure: keyframe at {} ns skipped: {}", next->timestamp_ns, e.what());

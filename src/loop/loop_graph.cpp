@@ -65,7 +65,7 @@ bool LoopGraph::agree(const Pending& a, const Pending& b) const {
          core::rotationAngleDeg(difference) <= config_.consistency_deg;
 }
 
-void LoopGraph::add(const fusion::KeyframeRecord& record) {
+void LoopGraph::add(const fusion::KeyframeRecord& record, bool depth_thinned) {
   const auto start = std::chrono::steady_clock::now();
   KeyframeView key;
   key.id = static_cast<int>(keyframes_.size());
@@ -73,7 +73,7 @@ void LoopGraph::add(const fusion::KeyframeRecord& record) {
   key.T_W_C = record.T_W_C;
   key.features = record.features;
   key.intrinsics = record.intrinsics;
-  key.depth_m = strideDepth(record.depth_m, config_.dense_stride);
+  key.depth_m = depth_thinned ? record.depth_m : strideDepth(record.depth_m, config_.dense_stride);
   key.starts_segment = record.starts_segment || keyframes_.empty();
   if (keyframes_.empty()) {
     corrected_.push_back(record.T_W_C);

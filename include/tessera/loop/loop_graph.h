@@ -53,8 +53,11 @@ class LoopGraph {
  public:
   explicit LoopGraph(const LoopConfig& config);
 
-  // Adds the tracker's next keyframe and closes the loops it finds.
-  void add(const fusion::KeyframeRecord& record);
+  // Adds the tracker's next keyframe and closes the loops it finds. Its depth is full size,
+  // or already thinned to every dense_stride-th pixel (`depth_thinned`).
+  void add(const fusion::KeyframeRecord& record, bool depth_thinned = false);
+
+  const LoopConfig& config() const { return config_; }
 
   // Re-optimises when loops were added since the last optimisation (end of a run).
   void finish();
