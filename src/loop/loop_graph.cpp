@@ -141,32 +141,27 @@ void LoopGraph::add(const fusion::KeyframeRecord& record, bool depth_thinned) {
                          query.id, candidate.keyframe);
       continue;
     }
-    const Pending loop{query.id, candidate.keyframe, *revisit};
-    bool confirmed = false;
+    // Accepted when an earlier revisit in the window agrees; accepted revisits stay in the
+    // window so that the next ones can be confirmed by them.
+    Pending loop{query.id, candidate.keyframe, *revisit, false};
     for (Pending& earlier : pending_) {
       if (earlier.query == query.id || !agree(earlier, loop)) continue;
-      if (earlier.match >= 0) acceptLoop(earlier);
-      earlier.match = -1;  // accepted: not to be counted as unconfirmed
-      confirmed = true;
+      if (!earlier.accepted) acceptLoop(earlier);
+      earlier.accepted = true;
+      loop.accepted = true;
     }
-    if (confirmed) {
-      acceptLoop(loop);
-    } else {
-      pending_.push_back(loop);
-    }
+    if (loop.accepted) acceptLoop(loop);
+    pending_.push_back(loop);
     break;  // one revisit per keyframe
   }
-  // Pending revisits that no later one confirmed in time.
+  // Revisits that left the window: those never confirmed are rejected.
   const auto expired = [&](const Pending& p) {
     return query.id - p.query > config_.confirm_within_keyframes;
   };
   for (const Pending& p : pending_) {
-    if (expired(p) && p.match >= 0) ++stats_.rejected_unconfirmed;
+    if (expired(p) && !p.accepted) ++stats_.rejected_unconfirmed;
   }
   pending_.erase(std::remove_if(pending_.begin(), pending_.end(), expired), pending_.end());
-  pending_.erase(std::remove_if(pending_.begin(), pending_.end(),
-                                [](const Pending& p) { return p.match < 0; }),
-                 pending_.end());
   ++stats_.keyframes;
   if (dirty_) optimise();
   stats_.keyframe_ms += msSince(start);
@@ -183,6 +178,10 @@ void LoopGraph::acceptLoop(const Pending& loop) {
 }
 
 void LoopGraph::finish() {
+  for (const Pending& p : pending_) {
+    if (!p.accepted) ++stats_.rejected_unconfirmed;
+  }
+  pending_.clear();
   const bool unsolved = std::any_of(loops_.begin(), loops_.end(),
                                     [](const LoopEdge& loop) { return !loop.kept; });
   if (dirty_ || unsolved) optimise();

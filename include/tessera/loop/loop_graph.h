@@ -73,10 +73,12 @@ class LoopGraph {
   const std::vector<KeyframeView>& keyframes() const { return keyframes_; }
 
  private:
+  // A verified revisit within the confirmation window.
   struct Pending {
     int query = -1;
     int match = -1;
     Revisit revisit;
+    bool accepted = false;  // confirmed, and a loop edge
   };
   // The pose of `query` that `revisit` from `match` implies, from match's corrected pose.
   core::Isometry impliedPose(int match, int query, const Revisit& revisit) const;
