@@ -53,7 +53,7 @@ void LoopCloser::work() {
     try {
       graph_.add(*next, true);
     } catch (const std::exception& e) {
-      // A keyframe loop closure cannot use costs its loops, never the run.
+      // A keyframe loop closure cannot use costs only its own loops, never the run.
       spdlog::warn("loop closure: keyframe at {} ns skipped: {}", next->timestamp_ns, e.what());
     }
   }
