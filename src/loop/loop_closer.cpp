@@ -6,6 +6,8 @@
 
 #include <exception>
 
+#include <omp.h>
+
 #include <spdlog/spdlog.h>
 
 namespace tessera::loop {
@@ -41,6 +43,9 @@ void LoopCloser::work() {
   // The lowest scheduling priority (Linux nices threads one by one): loop closure takes the
   // CPU the frame path leaves, and catches up at the end of the stream if it must.
   setpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid)), 19);
+  // One thread: Open3D's OpenMP loops (normals, ICP) would otherwise start a pool of threads
+  // owned by this one, which end with it.
+  omp_set_num_threads(1);
   for (;;) {
     std::shared_ptr<const fusion::KeyframeRecord> next;
     {
