@@ -153,7 +153,7 @@ int import(db::TextureStore& store, const DbArguments& args) {
       fmt::print("{}: already stored as texture {}\n", path, *existing);
       continue;
     }
-    const std::vector<std::int64_t> ids = store.commit({{record}, {}});
+    const std::vector<std::int64_t> ids = store.commit({{record}, {}, {}});
     fmt::print("{}: texture {} ({}, {}x{}, {} keypoints)\n", path, ids.at(0),
                db::kindName(record.kind), rgb.cols, rgb.rows, record.keypoints.size());
   }

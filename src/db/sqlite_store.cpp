@@ -242,6 +242,12 @@ std::vector<std::int64_t> SqliteStore::writeCommit(const Commit& commit,
     ids.push_back(find.step() ? find.int64(0) : insertTexture(insert, db, texture));
   }
 
+  Statement retire(db, "DELETE FROM instances WHERE run_id = ? AND patch_id = ?");
+  for (const RetiredPatch& gone : commit.retired) {
+    retire.reset();
+    retire.bind(1, gone.run_id).bind(2, std::int64_t{gone.patch_id}).run();
+  }
+
   Statement texture_exists(db, "SELECT 1 FROM textures WHERE id = ?");
   Statement run_exists(db, "SELECT 1 FROM runs WHERE id = ?");
   Statement stored_version(db, kStoredVersion);

@@ -173,12 +173,14 @@ nlohmann::json evaluateRun(const std::filesystem::path& run_dir,
       writeTumTrajectory(aligned, run_dir / "trajectory_aligned.txt");
     }
   }
-  // Loop closure's corrected poses, when the run closed loops.
+  // Loop closure's corrected poses, when the run closed loops. The patch map ends in their
+  // frame: its planes are compared with the truth through their alignment.
   figures["ate_after_closure_m"] = nullptr;
   const auto closed_path = run_dir / "trajectory_closed.txt";
   if (std::filesystem::exists(closed_path)) {
     if (const auto ate = absoluteTrajectoryError(readTumTrajectory(closed_path), truth_poses)) {
       figures["ate_after_closure_m"] = ate->rmse_m;
+      T_gt_est = ate->T_gt_est;
     }
   }
   figures["plane_recall"] = nullptr;

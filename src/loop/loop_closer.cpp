@@ -57,6 +57,7 @@ void LoopCloser::work() {
     }
     try {
       graph_.add(*next, true);
+      publish();
     } catch (const std::exception& e) {
       // A keyframe loop closure cannot use costs only its own loops, never the run.
       spdlog::warn("loop closure: keyframe at {} ns skipped: {}", next->timestamp_ns, e.what());
@@ -64,9 +65,27 @@ void LoopCloser::work() {
   }
   try {
     graph_.finish();
+    publish();
   } catch (const std::exception& e) {
     spdlog::warn("loop closure: the final optimisation failed: {}", e.what());
   }
+}
+
+std::shared_ptr<const MapCorrection> LoopCloser::correction() const {
+  const std::lock_guard<std::mutex> lock(published_mutex_);
+  return published_;
+}
+
+void LoopCloser::publish() {
+  const std::size_t generation = graph_.stats().optimisations;
+  if (generation == 0) return;
+  {
+    const std::lock_guard<std::mutex> lock(published_mutex_);
+    if (published_ && published_->generation == generation) return;
+  }
+  auto correction = std::make_shared<const MapCorrection>(graph_.correction());
+  const std::lock_guard<std::mutex> lock(published_mutex_);
+  published_ = std::move(correction);
 }
 
 }  // namespace tessera::loop

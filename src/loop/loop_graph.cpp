@@ -242,6 +242,18 @@ void LoopGraph::optimise() {
   dirty_ = false;
 }
 
+MapCorrection LoopGraph::correction() const {
+  MapCorrection correction;
+  correction.generation = stats_.optimisations;
+  correction.keyframe_ns.reserve(keyframes_.size());
+  correction.motion.reserve(keyframes_.size());
+  for (std::size_t k = 0; k < keyframes_.size(); ++k) {
+    correction.keyframe_ns.push_back(keyframes_[k].timestamp_ns);
+    correction.motion.push_back(corrected_[k] * keyframes_[k].T_W_C.inverse());
+  }
+  return correction;
+}
+
 eval::Trajectory LoopGraph::correct(const eval::Trajectory& trajectory) const {
   eval::Trajectory out;
   std::size_t anchor = 0;

@@ -72,10 +72,22 @@ void runGraph(SourceStage& source, TrackingStage& tracking, IntegrationStage& in
       const auto now = std::chrono::steady_clock::now();
       for (planes::PatchSnapshot& patch : patches) {
         jobs.push_back(
-            {next_sequence++, next_batch, patches.size(), frame_index, std::move(patch), now});
+            {next_sequence++, next_batch, patches.size(), frame_index, std::move(patch), now, {}});
       }
       if (!jobs.empty()) ++next_batch;
       patches.clear();
+      return jobs;
+    };
+    // Patches merged into others leave the database in the same order.
+    auto retirementsOf = [&](const std::vector<planes::PatchEvent>& events) {
+      std::vector<PatchJob> jobs;
+      for (const planes::PatchEvent& event : events) {
+        if (event.kind != planes::PatchEvent::Kind::kRetired) continue;
+        PatchJob job;
+        job.sequence = next_sequence++;
+        job.retired = event.id;
+        jobs.push_back(std::move(job));
+      }
       return jobs;
     };
     using PlanesNode =
@@ -83,6 +95,9 @@ void runGraph(SourceStage& source, TrackingStage& tracking, IntegrationStage& in
     PlanesNode planes_node(
         graph, flow::serial, [&](Numbered<FusedFrame> fused, PlanesNode::output_ports_type& out) {
           fused.item = planes.process(std::move(fused.item));
+          for (PatchJob& job : retirementsOf(fused.item.patch_events)) {
+            std::get<1>(out).try_put(std::move(job));
+          }
           for (PatchJob& job : jobsOf(fused.item.finalized_patches, fused.item.frame.index)) {
             std::get<1>(out).try_put(std::move(job));
           }
@@ -97,6 +112,10 @@ void runGraph(SourceStage& source, TrackingStage& tracking, IntegrationStage& in
         graph, [](const DescribedPatch& described) { return described.sequence; });
     flow::function_node<DescribedPatch, flow::continue_msg> commit_node(
         graph, flow::serial, [&](DescribedPatch described) {
+          if (described.retired) {
+            committer.retire(*described.retired);
+            return flow::continue_msg{};
+          }
           const DescribedPatch::Batch batch = described.batchInfo();
           std::optional<texture::PatchBitmap> bitmap = described.bitmap;
           const CommitRecord record = committer.process(std::move(described));
@@ -131,8 +150,10 @@ void runGraph(SourceStage& source, TrackingStage& tracking, IntegrationStage& in
 
     // End of stream: the patches still live are finalized and textured like the others.
     std::vector<planes::PatchSnapshot> finalized;
-    sink.writePatchEvents(planes.finish(finalized));
+    const std::vector<planes::PatchEvent> events = planes.finishStream(finalized);
+    sink.writePatchEvents(events);
     const std::uint64_t end_index = sink.framesDone();
+    for (PatchJob& job : retirementsOf(events)) describe_node.try_put(std::move(job));
     for (PatchJob& job : jobsOf(finalized, end_index)) describe_node.try_put(std::move(job));
     graph.wait_for_all();
   });

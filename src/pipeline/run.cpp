@@ -142,7 +142,7 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
   IntegrationStage integration_stage(config.tsdf, threads, options.holdout_every);
   planes::PlaneAlignmentConfig alignment = config.pose_correction;
   alignment.enabled = alignment.enabled && options.poses == PoseSource::kTrack;
-  PlaneStage plane_stage(config.planes, config.patches, alignment);
+  PlaneStage plane_stage(config.planes, config.patches, alignment, loop_closer.get());
   // Finalized patches' colour samples wait here while out of memory; removed at the end.
   const std::filesystem::path sample_dir = options.out_dir / "samples";
   plane_stage.spillSamplesTo(sample_dir);
@@ -202,6 +202,11 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
     const loop::LoopGraph& graph = loop_closer->graph();
     summary.loop_closure = true;
     summary.loops = graph.stats();
+    summary.loop_corrections_followed = plane_stage.correctionsFollowed();
+    summary.loop_planes_moved = plane_stage.planesMovedByLoops();
+    summary.loop_planes_merged = plane_stage.planesMergedByLoops();
+    summary.loop_instances_retired = commit_stage.retirements();
+    summary.loop_wait_s = plane_stage.loopWaitS();
     const eval::Trajectory closed = graph.correct(sink.estimate());
     eval::writeTumTrajectory(closed, options.out_dir / "trajectory_closed.txt");
     summary.ate_after_closure = eval::absoluteTrajectoryError(closed, sink.groundTruth());
@@ -317,6 +322,11 @@ void writeReport(const RunSummary& summary, const std::filesystem::path& path) {
   report["pose_graph_optimisations"] = summary.loops.optimisations;
   report["pose_graph_ms"] = summary.loops.pose_graph_ms;
   report["loop_keyframe_ms"] = summary.loops.keyframe_ms;
+  report["loop_corrections_followed"] = summary.loop_corrections_followed;
+  report["loop_planes_moved"] = summary.loop_planes_moved;
+  report["loop_planes_merged"] = summary.loop_planes_merged;
+  report["loop_patches_retired_in_db"] = summary.loop_instances_retired;
+  report["loop_wait_s"] = summary.loop_wait_s;
   report["ate_after_closure_m"] =
       summary.ate_after_closure ? json(summary.ate_after_closure->rmse_m) : json(nullptr);
   // View PSNR needs the captured frames again: `tessera eval RUN_DIR --frames SOURCE` fills it.

@@ -100,8 +100,9 @@ std::optional<core::Isometry> TrackingStage::poseOf(const core::Frame& frame,
     problem = "tracking lost: " + tracked.problem;
     return std::nullopt;
   }
-  if (loop_closer_) {
-    for (const auto& keyframe : tracked.new_keyframes) loop_closer_->add(keyframe);
+  for (const auto& keyframe : tracked.new_keyframes) {
+    keyframe_ns_ = keyframe->timestamp_ns;
+    if (loop_closer_) loop_closer_->add(keyframe);
   }
   if (tracked.from_features) ++feature_poses_;
   if (tracked.status == fusion::TrackingStatus::kRelocalised) {
@@ -130,6 +131,7 @@ TrackedFrame TrackingStage::process(core::Frame frame) {
     try {
       if (frame.colour_camera) frame = core::withRegisteredColour(std::move(frame));
       tracked.T_W_C = poseOf(frame, tracked.skip_reason);
+      tracked.keyframe_ns = keyframe_ns_;
     } catch (const core::Error& e) {
       tracked.T_W_C.reset();
       tracked.skip_reason = e.what();
@@ -162,6 +164,7 @@ bool IntegrationStage::wantsFrame(const core::Isometry& T_W_C) {
 FusedFrame IntegrationStage::process(TrackedFrame tracked) {
   FusedFrame fused;
   fused.T_W_C = tracked.T_W_C;
+  fused.keyframe_ns = tracked.keyframe_ns;
   fused.skip_reason = std::move(tracked.skip_reason);
   fused.tracking_ms = tracked.tracking_ms;
   if (tracked.frame.source_interrupted) {
@@ -213,8 +216,9 @@ FusedFrame IntegrationStage::process(TrackedFrame tracked) {
 
 PlaneStage::PlaneStage(const planes::PlaneDetectorConfig& detector,
                        const planes::PatchMapConfig& patches,
-                       const planes::PlaneAlignmentConfig& alignment)
-    : detector_(detector), map_(patches), alignment_(alignment) {}
+                       const planes::PlaneAlignmentConfig& alignment,
+                       loop::LoopCloser* loop_closer)
+    : detector_(detector), map_(patches), alignment_(alignment), loop_closer_(loop_closer) {}
 
 bool PlaneStage::wantsColours(std::uint64_t index, const core::Isometry& T_W_C) const {
   const auto every = static_cast<std::uint64_t>(map_.config().colour_every_n_frames);
@@ -264,23 +268,32 @@ FusedFrame PlaneStage::process(FusedFrame fused) {
   {
     ScopedStageTime time(timer_);
     try {
+      followLoopClosure();
       if ((fused.integrated || fused.between_integrations) && fused.T_W_C) {
-        // The tracked pose, corrected for the drift measured against the patches so far.
+        // The tracked pose, corrected for the drift measured against the patches so far; the
+        // map holds it moved on by loop closure.
         fused.T_W_C_planes = correction_ * *fused.T_W_C;
+        const std::int64_t keyframe_ns = fused.keyframe_ns.value_or(fused.frame.timestamp_ns);
+        const core::Isometry loop = loopMotion(keyframe_ns);
         const planes::PlaneDetection detection = detector_.detect(fused.frame);
         fused.planes_detected = detection.planes.size();
         std::vector<planes::PlaneObservation> observations =
-            planes::observationsOf(fused.frame, detection, *fused.T_W_C_planes);
-        if (const auto D = planes::alignToPatches(map_, observations,
-                                                  fused.T_W_C_planes->translation(), alignment_)) {
-          correction_ = *D * correction_;
-          fused.T_W_C_planes = *D * *fused.T_W_C_planes;
+            planes::observationsOf(fused.frame, detection, loop * *fused.T_W_C_planes);
+        if (const auto D = planes::alignToPatches(
+                map_, observations, (loop * *fused.T_W_C_planes).translation(), alignment_)) {
+          const core::Isometry D_tracked = loop.inverse() * *D * loop;  // in the tracker's world
+          correction_ = D_tracked * correction_;
+          fused.T_W_C_planes = D_tracked * *fused.T_W_C_planes;
           for (auto& observation : observations) {
             for (auto& X : observation.points_W) X = *D * X;
           }
         }
-        fused.colour_gain =
-            sampleColours(fused.frame, detection, *fused.T_W_C_planes, map_.add(observations));
+        for (auto& observation : observations) {
+          observation.keyframe_ns = keyframe_ns;
+          observation.loop_motion = loop;
+        }
+        fused.colour_gain = sampleColours(fused.frame, detection, loop * *fused.T_W_C_planes,
+                                          map_.add(observations));
       }
     } catch (const core::Error& e) {
       spdlog::warn("plane detection skipped {}", e.what());
@@ -294,6 +307,37 @@ FusedFrame PlaneStage::process(FusedFrame fused) {
   fused.patches_live = map_.liveCount();
   fused.patches_finalized = map_.finalizedCount();
   return fused;
+}
+
+void PlaneStage::followLoopClosure() {
+  if (loop_closer_ == nullptr) return;
+  std::shared_ptr<const loop::MapCorrection> newest = loop_closer_->correction();
+  if (!newest || (loop_correction_ && newest->generation == loop_correction_->generation)) return;
+  loop_correction_ = std::move(newest);
+  const std::size_t moved = map_.followCorrection(
+      [this](std::int64_t keyframe_ns) { return loop_correction_->at(keyframe_ns); });
+  const std::size_t merged = map_.mergeCoinciding();
+  ++corrections_followed_;
+  planes_moved_ += moved;
+  planes_merged_ += merged;
+  spdlog::info("loop closure: the map followed optimisation {}: {} planes moved, {} merged",
+               loop_correction_->generation, moved, merged);
+}
+
+core::Isometry PlaneStage::loopMotion(std::int64_t keyframe_ns) const {
+  return loop_correction_ ? loop_correction_->at(keyframe_ns) : core::Isometry::Identity();
+}
+
+std::vector<planes::PatchEvent> PlaneStage::finishStream(
+    std::vector<planes::PatchSnapshot>& finalized) {
+  if (loop_closer_ != nullptr) {
+    const auto start = std::chrono::steady_clock::now();
+    loop_closer_->finish();
+    loop_wait_s_ =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    followLoopClosure();
+  }
+  return finish(finalized);
 }
 
 std::vector<planes::PatchEvent> PlaneStage::finish(std::vector<planes::PatchSnapshot>& finalized) {

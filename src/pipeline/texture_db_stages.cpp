@@ -130,6 +130,8 @@ DescribedPatch DescribeStage::process(const PatchJob& job) const {
   described.batch_size = job.batch_size;
   described.frame_index = job.frame_index;
   described.finalized_at = job.finalized_at;
+  described.retired = job.retired;
+  if (job.retired) return described;
   described.bitmap = textures_.build(job.patch);
   if (!described.bitmap) return described;
   const texture::PatchBitmap& bitmap = *described.bitmap;
@@ -373,6 +375,21 @@ CommitRecord CommitStage::process(DescribedPatch described) {
   record.commit_latency_ms = msSince(described.finalized_at);
   commit_latencies_ms_.push_back(record.commit_latency_ms);
   return record;
+}
+
+void CommitStage::retire(int patch_id) {
+  ScopedStageTime time(timer_);
+  db::Commit commit;
+  commit.retired.push_back({run_id_, patch_id});
+  try {
+    store_.commit(commit);
+  } catch (const core::Error& e) {
+    // The database keeps an instance of a patch the map no longer has; the map is right.
+    spdlog::error("patch {} (merged into another): its instances stay: {}", patch_id, e.what());
+    ++commit_failures_;
+  }
+  instances_.erase(patch_id);
+  ++retirements_;
 }
 
 }  // namespace tessera::pipeline

@@ -197,7 +197,8 @@ void PatchMap::refitPlane(int plane_id) {
   }
 }
 
-void PatchMap::mergePlane(int into_id, int from_id, std::vector<int>& ids) {
+std::set<int> PatchMap::mergePlane(int into_id, int from_id, std::vector<int>& ids) {
+  std::set<int> took;
   std::vector<Patch> from;
   for (auto it = patches_.begin(); it != patches_.end();) {
     if (it->plane != from_id) {
@@ -207,7 +208,13 @@ void PatchMap::mergePlane(int into_id, int from_id, std::vector<int>& ids) {
     from.push_back(std::move(*it));
     it = patches_.erase(it);
   }
-  planes_.at(into_id).moments.add(planes_.at(from_id).moments);
+  PlaneState& into = planes_.at(into_id);
+  into.moments.add(planes_.at(from_id).moments);
+  // A keyframe both planes had has the same motion in both: both followed every correction.
+  for (const auto& [keyframe_ns, observer] : planes_.at(from_id).observers) {
+    into.observers[keyframe_ns].points += observer.points;
+    into.observers[keyframe_ns].motion = observer.motion;
+  }
   planes_.erase(from_id);
 
   for (Patch& gone : from) {
@@ -229,6 +236,7 @@ void PatchMap::mergePlane(int into_id, int from_id, std::vector<int>& ids) {
       cells.push_back(frame.cellOf(gone.cellCentre(cell, config_.cell_m), config_.cell_m));
     }
     const int took_most = placeCells(into_id, cells);
+    took.insert(took_most);
     Patch& heir = patchWithId(took_most);
     heir.footprint_sum_m += gone.footprint_sum_m;
     heir.footprint_pixels += gone.footprint_pixels;
@@ -250,10 +258,18 @@ void PatchMap::mergePlane(int into_id, int from_id, std::vector<int>& ids) {
                       static_cast<int>(std::floor(sample.v / config_.cell_m))};
       if (const auto it = tiles.find(grid.keyOf(cell)); it != tiles.end()) {
         it->second->samples.add(sample);
+        took.insert(it->second->id);
+      }
+    }
+    // Cells placed in other tiles than the one that took most.
+    for (const Cell& cell : cells) {
+      if (const auto it = tiles.find(grid.keyOf(cell)); it != tiles.end()) {
+        took.insert(it->second->id);
       }
     }
   }
   refitPlane(into_id);
+  return took;
 }
 
 std::vector<int> PatchMap::add(const std::vector<PlaneObservation>& observations) {
@@ -296,6 +312,9 @@ std::vector<int> PatchMap::add(const std::vector<PlaneObservation>& observations
     const int kept = planes.front();
     for (std::size_t m = planes.size(); m-- > 1;) mergePlane(kept, planes[m], ids);
     ids.push_back(placePoints(kept, observation.points_W, moments));
+    PlaneState::Observer& observer = planes_.at(kept).observers[observation.keyframe_ns];
+    observer.points += static_cast<double>(observation.points_W.size());
+    observer.motion = observation.loop_motion;
   }
   return ids;
 }

@@ -157,6 +157,31 @@ TEST(SqliteStoreLayers, SameVersionReplacesOnlyTheLayersItCarries) {
   EXPECT_EQ(fieldsOf(store->instances()), expected);
 }
 
+// A patch merged into another after a loop closure leaves the database with every layer; the
+// same patch id of another run, and the patch it merged into, keep theirs.
+TEST(SqliteStoreLayers, ARetiredPatchLosesEveryLayerOfItsRunOnly) {
+  TempFolder dir;
+  auto store = openSqliteStore(dir / "textures.db");
+  const std::int64_t run = store->beginRun("loop");
+  const std::int64_t other_run = store->beginRun("loop again");
+  const auto wall = commitLayers(*store, run, 3, 1, 1, 70);
+  const auto doubled = commitLayers(*store, run, 8, 2, 2, 71);
+  commitLayers(*store, other_run, 8, 1, 1, 73);
+  Commit retire;
+  retire.retired.push_back({run, 8});
+  // The merged wall's new version in the same transaction, as the textures it reuses.
+  retire.instances.push_back(layerInstance(run, 3, 2, 0, wall[0]));
+  EXPECT_TRUE(store->commit(retire).empty());
+  const std::vector<TextureInstance> left = store->instances(run);
+  ASSERT_EQ(left.size(), 1u);
+  EXPECT_EQ(fieldsOf(left.front()), fieldsOf(layerInstance(run, 3, 2, 0, wall[0])));
+  ASSERT_EQ(store->instances(other_run).size(), 1u);
+  EXPECT_EQ(store->instances(other_run).front().patch_id, 8);
+  // The textures stay: the database is a library other runs may reuse.
+  EXPECT_EQ(store->stats().textures, 4u);
+  EXPECT_EQ(usesOf(*store, doubled[0]), 0u);
+}
+
 TEST(SqliteStoreLayers, NegativeLayerIsRefused) {
   TempFolder dir;
   const auto path = dir / "textures.db";

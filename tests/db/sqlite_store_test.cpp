@@ -264,7 +264,7 @@ TEST(SqliteStore, FailedCommitStoresNothingOfIt) {
 TEST(SqliteStore, RefusesANewerSchemaWithoutTouchingTheFile) {
   TempFolder dir;
   const auto path = dir / "textures.db";
-  openSqliteStore(path)->commit({{makeTexture(30)}, {}});
+  openSqliteStore(path)->commit({{makeTexture(30)}, {}, {}});
   const std::string newer = std::to_string(kSchemaVersion + 1);
   rawExec(path, "UPDATE meta SET value = '" + newer +
                     "' WHERE key = 'schema_version'; PRAGMA user_version = " + newer + ";");
@@ -286,7 +286,7 @@ TEST(SqliteStore, RefusesANewerSchemaWithoutTouchingTheFile) {
 TEST(SqliteStore, RefusesANewerSchemaInTheMetaTable) {
   TempFolder dir;
   const auto path = dir / "textures.db";
-  openSqliteStore(path)->commit({{makeTexture(31)}, {}});
+  openSqliteStore(path)->commit({{makeTexture(31)}, {}, {}});
   const std::string newer = std::to_string(kSchemaVersion + 1);
   rawExec(path, "UPDATE meta SET value = '" + newer + "' WHERE key = 'schema_version'");
   const std::string before = fileContents(path);
@@ -324,7 +324,7 @@ TEST(SqliteStore, RefusesFilesThatAreNotTesseraDatabases) {
 TEST(SqliteStore, RefusesACorruptDatabase) {
   TempFolder dir;
   const auto path = dir / "textures.db";
-  openSqliteStore(path)->commit({{makeTexture(32)}, {}});
+  openSqliteStore(path)->commit({{makeTexture(32)}, {}, {}});
   std::string bytes = fileContents(path);
   ASSERT_GT(bytes.size(), 4096u);
   // Keep the 100-byte header (so it still looks like tessera's); garble the schema page.
@@ -348,7 +348,7 @@ TEST(SqliteStore, EmptyFileIsANewDatabaseOnlyWhenCreating) {
     EXPECT_EQ(std::filesystem::file_size(path), 0u);
   }
   auto store = openSqliteStore(path);
-  store->commit({{makeTexture(33)}, {}});
+  store->commit({{makeTexture(33)}, {}, {}});
   EXPECT_EQ(store->stats().textures, 1u);
 }
 
@@ -366,14 +366,14 @@ TEST(SqliteStore, ReadOnlyNeverCreatesNorWrites) {
   EXPECT_NE(message.find("no folder"), std::string::npos) << message;
 
   const auto existing = dir / "textures.db";
-  openSqliteStore(existing)->commit({{makeTexture(34)}, {}});
+  openSqliteStore(existing)->commit({{makeTexture(34)}, {}, {}});
   auto store = openSqliteStore(existing, {.create = false, .read_only = true});
   EXPECT_EQ(store->textures().size(), 1u);
   // The writer left the file alone (no -wal, -shm), and reading it adds none.
   EXPECT_EQ(folderListing(dir.path()), std::vector<std::string>{"textures.db"});
   message = errorOf([&] { store->beginRun("x"); });
   EXPECT_NE(message.find("read-only"), std::string::npos) << message;
-  message = errorOf([&] { store->commit({{makeTexture(35)}, {}}); });
+  message = errorOf([&] { store->commit({{makeTexture(35)}, {}, {}}); });
   EXPECT_NE(message.find("read-only"), std::string::npos) << message;
 }
 

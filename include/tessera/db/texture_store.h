@@ -24,9 +24,17 @@ constexpr int kSchemaVersion = 2;
 // layers of a patch. A newer version of a patch replaces every stored layer of that run and
 // patch (layers it no longer has are removed); an older one, arriving late, is ignored with
 // all its layers; the same version replaces the stored instance of each layer it carries.
+// A patch of a run that is gone from the map (merged into another after a loop closure): every
+// layer of it is removed.
+struct RetiredPatch {
+  std::int64_t run_id = 0;
+  int patch_id = 0;
+};
+
 struct Commit {
   std::vector<TextureRecord> textures;
   std::vector<TextureInstance> instances;
+  std::vector<RetiredPatch> retired;  // removed before the instances are written
 };
 
 struct CcvEntry {

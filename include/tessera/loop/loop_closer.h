@@ -2,8 +2,8 @@
 // Runs loop closure (loop_graph.h) on its own thread, off the frame path: the tracking stage
 // hands over keyframes without waiting, and the run reads the corrected trajectory at the end.
 //
-// Thread-safety: add() from one thread (the tracking stage); finish() and the readers after
-// the stream has ended.
+// Thread-safety: add() from one thread (the tracking stage); correction() from any thread at
+// any time; finish() and graph() after the stream has ended.
 #include <condition_variable>
 #include <deque>
 #include <memory>
@@ -29,14 +29,22 @@ class LoopCloser {
 
   const LoopGraph& graph() const { return graph_; }
 
+  // The correction after the newest optimisation, or nothing before the first. The map
+  // (PlaneStage) follows it while the run goes on.
+  std::shared_ptr<const MapCorrection> correction() const;
+
  private:
   void work();
+  // Publishes the graph's correction when it was optimised since the last one published.
+  void publish();
 
   LoopGraph graph_;
   std::mutex mutex_;
   std::condition_variable wake_;
   std::deque<std::shared_ptr<const fusion::KeyframeRecord>> queue_;
   bool finishing_ = false;
+  mutable std::mutex published_mutex_;
+  std::shared_ptr<const MapCorrection> published_;
   std::thread worker_;
 };
 

@@ -17,6 +17,7 @@
 #include "tessera/eval/trajectory.h"
 #include "tessera/fusion/tracker.h"
 #include "tessera/loop/loop_config.h"
+#include "tessera/loop/map_correction.h"
 #include "tessera/loop/place_index.h"
 #include "tessera/loop/pose_graph.h"
 #include "tessera/loop/revisit.h"
@@ -65,6 +66,9 @@ class LoopGraph {
   // `trajectory` (tracked poses) moved with the corrections of their keyframes: each pose
   // follows the last keyframe taken at or before it.
   eval::Trajectory correct(const eval::Trajectory& trajectory) const;
+
+  // Each keyframe's motion from its tracked pose to its pose after the last optimisation.
+  MapCorrection correction() const;
 
   const LoopStats& stats() const { return stats_; }
   const std::vector<LoopEdge>& loops() const { return loops_; }

@@ -98,9 +98,15 @@ struct RunSummary {
   // ATE of the fused poses against the recording's ground truth, when it has one.
   std::optional<eval::AteResult> ate;
   // Loop closure (tracked poses only): what it found, and the ATE of the corrected trajectory
-  // (OUT/trajectory_closed.txt); `ate` stays that of the poses the map was fused at.
+  // (OUT/trajectory_closed.txt), in whose frame the patch map ends; `ate` stays that of the
+  // poses before loop closure (OUT/trajectory.txt), at which the TSDF was fused.
   bool loop_closure = false;
   loop::LoopStats loops;
+  // The map after loop closure: corrections it followed, planes moved, planes merged into
+  // another (a place mapped twice), and their patches' instances removed from the database.
+  std::size_t loop_corrections_followed = 0, loop_planes_moved = 0, loop_planes_merged = 0;
+  std::size_t loop_instances_retired = 0;
+  double loop_wait_s = 0.0;  // the end of the stream waiting for loop closure (in wall_s)
   std::optional<eval::AteResult> ate_after_closure;
   std::vector<StageFigures> stages;
 };

@@ -9,6 +9,7 @@
 #include <fstream>
 #include <functional>
 #include <map>
+#include <memory>
 #include <mutex>
 #include <optional>
 #include <string>
@@ -77,6 +78,9 @@ struct TrackedFrame {
   std::optional<core::Isometry> T_W_C;  // nothing: do not integrate
   std::string skip_reason;
   double tracking_ms = 0.0;
+  // The time of the last keyframe the tracker made at or before this frame: loop closure
+  // corrects the frame's pose with that keyframe's.
+  std::optional<std::int64_t> keyframe_ns;
 };
 
 // A frame after fusion, with what the sink reports about it.
@@ -87,6 +91,7 @@ struct FusedFrame {
   // Posed and searched for planes, but not integrated (tsdf.integrate_every_n_frames).
   bool between_integrations = false;
   std::optional<core::Isometry> T_W_C;  // the pose it was fused at
+  std::optional<std::int64_t> keyframe_ns;  // TrackedFrame::keyframe_ns
   std::string skip_reason;              // why the frame was not integrated
   std::size_t tsdf_bytes = 0;
   std::size_t tsdf_blocks_released = 0;  // this frame, far behind the camera
@@ -133,6 +138,7 @@ class TrackingStage {
   std::size_t tracking_restarts_ = 0;
   std::size_t relocalisations_ = 0;  // found again after a loss or an interrupted source
   std::size_t feature_poses_ = 0;    // frames whose solve started from a feature pose
+  std::optional<std::int64_t> keyframe_ns_;  // the newest keyframe's time
   StageTimer timer_;
 };
 
@@ -171,26 +177,41 @@ class IntegrationStage {
 };
 
 // Finds the planar regions of each posed frame, grows the patch map with them and their
-// colours, and finalizes patches that stopped growing or left the view.
+// colours, and finalizes patches that stopped growing or left the view. With loop closure the
+// map follows each new correction (PatchMap::followCorrection, then mergeCoinciding), and each
+// frame's points are placed with the correction of its keyframe.
 class PlaneStage {
  public:
   PlaneStage(const planes::PlaneDetectorConfig& detector, const planes::PatchMapConfig& patches,
-             const planes::PlaneAlignmentConfig& alignment);
+             const planes::PlaneAlignmentConfig& alignment,
+             loop::LoopCloser* loop_closer = nullptr);
 
   FusedFrame process(FusedFrame fused);
-  // End of stream: finalizes every remaining patch above the area bound; `finalized` gets a
-  // copy of each for texturing.
+  // Finalizes every remaining patch above the area bound; `finalized` gets a copy of each for
+  // texturing (an interrupted source: what was seen so far is kept).
   std::vector<planes::PatchEvent> finish(std::vector<planes::PatchSnapshot>& finalized);
+  // End of stream: waits for loop closure's last optimisation and follows it, then finish().
+  std::vector<planes::PatchEvent> finishStream(std::vector<planes::PatchSnapshot>& finalized);
 
   const planes::PatchMap& map() const { return map_; }
   // Where finalized patches' colour samples go when they leave memory (PatchMap).
   void spillSamplesTo(std::filesystem::path dir) { map_.setSampleSpillDir(std::move(dir)); }
   std::size_t finalizations() const { return finalizations_; }  // versions included
   std::size_t retirements() const { return retirements_; }
+  // Loop-closure corrections the map followed, planes they moved and planes merged after.
+  std::size_t correctionsFollowed() const { return corrections_followed_; }
+  std::size_t planesMovedByLoops() const { return planes_moved_; }
+  std::size_t planesMergedByLoops() const { return planes_merged_; }
+  // How long the end of the stream waited for loop closure to catch up, seconds.
+  double loopWaitS() const { return loop_wait_s_; }
   const StageTimer& timer() const { return timer_; }
 
  private:
   void count(const std::vector<planes::PatchEvent>& events);
+  // Moves the map with the loop closer's newest correction, if it has one not followed yet.
+  void followLoopClosure();
+  // The loop-closure motion of the keyframe at `keyframe_ns` (identity before any).
+  core::Isometry loopMotion(std::int64_t keyframe_ns) const;
   std::vector<planes::PatchSnapshot> snapshotsOf(
       const std::vector<planes::PatchEvent>& events) const;
   // Every N-th frame (patches.colour_every_n_frames), and any frame the camera has moved
@@ -207,9 +228,15 @@ class PlaneStage {
   planes::SharpnessGauge sharpness_;
   std::optional<core::Isometry> last_colour_pose_;
   planes::PlaneAlignmentConfig alignment_;
-  core::Isometry correction_ = core::Isometry::Identity();  // world drift, carried frame to frame
+  // World drift measured against the patches, carried frame to frame, in the tracker's world
+  // (before loop closure's motion).
+  core::Isometry correction_ = core::Isometry::Identity();
+  loop::LoopCloser* loop_closer_;
+  std::shared_ptr<const loop::MapCorrection> loop_correction_;  // the one the map follows
   std::size_t finalizations_ = 0;
   std::size_t retirements_ = 0;
+  std::size_t corrections_followed_ = 0, planes_moved_ = 0, planes_merged_ = 0;
+  double loop_wait_s_ = 0.0;
   StageTimer timer_;
 };
 

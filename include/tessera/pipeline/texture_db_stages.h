@@ -27,6 +27,8 @@ using SteadyTime = std::chrono::steady_clock::time_point;
 
 // A patch the plane stage finalized, numbered in finalization order; `batch` groups the
 // patches finalized by one frame (or by the end of the stream).
+// A retirement (`retired`: the patch was merged into another) takes a place in the same
+// order, so that it reaches the database after every commit of the patch before it.
 struct PatchJob {
   std::size_t sequence = 0;
   std::size_t batch = 0;
@@ -34,6 +36,7 @@ struct PatchJob {
   std::uint64_t frame_index = 0;
   planes::PatchSnapshot patch;
   SteadyTime finalized_at;
+  std::optional<int> retired;  // the patch id; `patch` and the batch are then unused
 };
 
 // A region of a bitmap that its base layer does not explain (a poster on a brick wall),
@@ -64,6 +67,7 @@ struct LayerPlan {
 // out without the database.
 struct DescribedPatch {
   std::size_t sequence = 0;
+  std::optional<int> retired;  // a retirement (PatchJob), nothing built
   std::size_t batch = 0;
   std::size_t batch_size = 0;
   std::uint64_t frame_index = 0;
@@ -211,6 +215,10 @@ class CommitStage {
               const pattern::PatternStageConfig& patterns, std::int64_t run_id);
 
   CommitRecord process(DescribedPatch described);
+  // Patch `patch_id` was merged into another: its instances leave the database and the map.
+  // A failed commit is counted and logged, as for process().
+  void retire(int patch_id);
+  std::size_t retirements() const { return retirements_; }
 
   // The newest instances of each patch id (its layers, 0 first), and the textures they use
   // (pixels per texture).
@@ -249,7 +257,7 @@ class CommitStage {
   std::int64_t run_id_;
   std::map<int, std::vector<db::TextureInstance>> instances_;
   std::map<std::int64_t, std::size_t> texture_pixels_;
-  std::size_t textures_stored_ = 0, patterns_stored_ = 0, commit_failures_ = 0;
+  std::size_t textures_stored_ = 0, patterns_stored_ = 0, commit_failures_ = 0, retirements_ = 0;
   std::size_t ccv_considered_ = 0, ccv_removed_ = 0;
   std::vector<double> commit_latencies_ms_;
   StageTimer match_timer_, timer_;

@@ -9,8 +9,10 @@
 // the tile that grows, not the whole building.
 #include <array>
 #include <cstddef>
+#include <cstdint>
 #include <deque>
 #include <filesystem>
+#include <functional>
 #include <map>
 #include <optional>
 #include <set>
@@ -76,6 +78,11 @@ struct PlaneObservation {
   // its (u, v) frame and every bitmap on it show the surface as seen from the front, never
   // mirrored (a texture seen twice, or imported from a photo, then matches by a similarity).
   Eigen::Vector3d camera_W = Eigen::Vector3d::Zero();
+  // The time of the keyframe the frame was tracked after, and the loop-closure motion its
+  // points were moved by (identity before any loop): the plane they go to follows later
+  // corrections of that keyframe (followCorrection).
+  std::int64_t keyframe_ns = 0;
+  core::Isometry loop_motion = core::Isometry::Identity();
 };
 
 // The regions of `detection` as world points (frame seen from T_W_C).
@@ -183,6 +190,18 @@ class PatchMap {
   // Closes frame `frame_index` (patches seen in it are the ones add() touched since the last
   // call) and returns the finalizations and retirements it caused.
   std::vector<PatchEvent> endFrame(long frame_index);
+  // Loop closure moved the keyframes: each keyframe's points on a plane should move by
+  // motion_at(keyframe) * (the motion they were placed with)^-1. A plane is rigid, so it moves
+  // by the mean of its keyframes' moves, weighted by how many points each gave, about its
+  // centroid. Cells and samples keep their (u, v). Returns how many planes moved.
+  std::size_t followCorrection(
+      const std::function<core::Isometry(std::int64_t keyframe_ns)>& motion_at);
+  // Merges each plane into an older one it now continues (the association bounds, touching
+  // its cells): a place mapped twice before the loop closed. The tiles that took cells or
+  // colours grow a new version (finalized again once stable or out of view, from the merged
+  // samples); the merged plane's finalized tiles are retired. Returns how many merged.
+  std::size_t mergeCoinciding();
+
   // At the end of the stream: finalizes every patch not finalized, above the area bound.
   std::vector<PatchEvent> finalizeAll();
 
@@ -217,6 +236,13 @@ class PatchMap {
     TileGrid grid;
     Cell lo{0, 0}, hi{0, 0};  // bounds of every cell of every tile (once has_cells)
     bool has_cells = false;
+    // By keyframe time: the points its frames gave, and the loop-closure motion they were
+    // placed with.
+    struct Observer {
+      double points = 0.0;
+      core::Isometry motion = core::Isometry::Identity();
+    };
+    std::map<std::int64_t, Observer> observers;
   };
 
   // Adds a region's points to plane `plane_id`, cutting new tiles as they are needed; returns
@@ -225,7 +251,12 @@ class PatchMap {
                   const PointMoments& moments);
   // Moves every tile of plane `from_id` (cells, samples) into plane `into_id`'s tiles; the
   // tiles moved are gone, and ids handed out for them become the tiles that took them.
-  void mergePlane(int into_id, int from_id, std::vector<int>& ids);
+  // Returns the ids of the tiles that took cells or samples.
+  std::set<int> mergePlane(int into_id, int from_id, std::vector<int>& ids);
+  // A plane (second) that continues an older one (first), if any.
+  std::optional<std::pair<int, int>> findCoinciding() const;
+  // Moves plane `plane_id` (its tiles' frames and planes, its moments) by `motion`.
+  void movePlane(int plane_id, const core::Isometry& motion);
   // Puts cells (in the plane's frame) into their tiles, which are created as needed and count
   // as seen this frame; returns the id of the tile that took most of them.
   int placeCells(int plane_id, const std::vector<Cell>& cells);

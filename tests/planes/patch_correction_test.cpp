@@ -1,0 +1,134 @@
+// The patch map after a loop closure: planes move with the keyframes they were seen from, and a
+// wall mapped twice (before and after the drift) becomes one patch with a new version.
+#include <cmath>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "support/synthetic_plane.h"
+#include "tessera/planes/patch_map.h"
+
+namespace tessera::planes {
+namespace {
+
+PatchMapConfig quickConfig() {
+  PatchMapConfig config;
+  config.stable_frames = 5;
+  config.out_of_view_frames = 5;
+  return config;
+}
+
+// The wall z = 1.5 seen by a camera truly at `T_true`, placed in the map from the tracked pose
+// `T_tracked` (drifted) moved by `loop_motion`, tracked after the keyframe at `keyframe_ns`, colours
+// included.
+std::vector<int> seeWall(PatchMap& map, const core::Isometry& T_true,
+                         const core::Isometry& T_tracked, std::int64_t keyframe_ns,
+                         const core::Isometry& loop_motion = core::Isometry::Identity()) {
+  const core::Frame frame =
+      test::renderPlane(test::kinectIntrinsics(), T_true, Eigen::Vector3d::UnitZ(), 1.5);
+  const PlaneDetection detection = PlaneDetector(PlaneDetectorConfig{}).detect(frame);
+  const core::Isometry T_map = loop_motion * T_tracked;
+  std::vector<PlaneObservation> observations = observationsOf(frame, detection, T_map);
+  for (PlaneObservation& observation : observations) {
+    observation.keyframe_ns = keyframe_ns;
+    observation.loop_motion = loop_motion;
+  }
+  const std::vector<int> ids = map.add(observations);
+  map.addColours(frame, detection, T_map, ids);
+  return ids;
+}
+
+core::Isometry shifted(double x, double z) {
+  core::Isometry T = core::Isometry::Identity();
+  T.translation() = Eigen::Vector3d(x, 0.0, z);
+  return T;
+}
+
+std::size_t countOf(const std::vector<PatchEvent>& events, PatchEvent::Kind kind) {
+  std::size_t n = 0;
+  for (const PatchEvent& e : events) n += e.kind == kind ? 1 : 0;
+  return n;
+}
+
+// Before the loop: the wall from the start (time 1000..), then seen again 0.4 m along it after
+// 10 cm of drift along its normal (time 5000..), which makes a second patch. The loop closure's
+// correction (-10 cm for keyframes from time 5000) moves the second onto the first, and it
+// merges: one patch, a new version from both views' samples, the doubled one retired.
+TEST(PatchCorrection, ADoubledWallMergesIntoOnePatchAfterTheLoopCloses) {
+  PatchMap map(quickConfig());
+  long frame = 0;
+  std::vector<PatchEvent> events;
+  const auto endFrame = [&] {
+    for (const PatchEvent& e : map.endFrame(frame++)) events.push_back(e);
+  };
+  for (int i = 0; i < 8; ++i) {
+    seeWall(map, shifted(0.0, 0.0), shifted(0.0, 0.0), 1000 + i);
+    endFrame();
+  }
+  const core::Isometry T_true = shifted(0.4, 0.0), T_drifted = shifted(0.4, 0.1);
+  for (int i = 0; i < 8; ++i) {
+    seeWall(map, T_true, T_drifted, 5000 + i);
+    endFrame();
+  }
+  ASSERT_EQ(map.patches().size(), 2u) << "the drifted view should double the wall";
+  ASSERT_EQ(countOf(events, PatchEvent::Kind::kFinalized), 2u);
+  const int first = map.patches()[0].id, doubled = map.patches()[1].id;
+  const std::size_t first_samples = map.patches()[0].samples.size();
+  const double first_area = map.areaM2(map.patches()[0]);
+
+  // The pose graph's answer: keyframes from time 5000 on were 10 cm too far along +z.
+  const auto motion_at = [](std::int64_t t) {
+    return t >= 5000 ? shifted(0.0, -0.1) : core::Isometry::Identity();
+  };
+  EXPECT_EQ(map.followCorrection(motion_at), 1u);  // only the doubled wall moves
+  ASSERT_EQ(map.patches().size(), 2u);
+  const Patch& moved = map.patches()[1];
+  EXPECT_NEAR(std::abs(moved.offset), 1.5, 0.003);
+  EXPECT_NEAR(std::abs(moved.normal.z()), 1.0, 1e-6);
+  // The same correction again moves nothing.
+  EXPECT_EQ(map.followCorrection(motion_at), 0u);
+
+  EXPECT_EQ(map.mergeCoinciding(), 1u);
+  ASSERT_EQ(map.patches().size(), 1u);
+  const Patch& wall = map.patches().front();
+  EXPECT_EQ(wall.id, first);
+  EXPECT_NEAR(std::abs(wall.offset), 1.5, 0.003);
+  EXPECT_GT(map.areaM2(wall), first_area + 0.3);  // 0.4 m more along x, over > 1 m of height
+  EXPECT_GT(wall.samples.size(), first_samples);
+  EXPECT_FALSE(wall.finalized);
+
+  events.clear();
+  endFrame();
+  EXPECT_EQ(countOf(events, PatchEvent::Kind::kRetired), 1u);
+  EXPECT_EQ(events.front().id, doubled);
+  for (const PatchEvent& e : map.finalizeAll()) events.push_back(e);
+  ASSERT_EQ(countOf(events, PatchEvent::Kind::kFinalized), 1u);
+  EXPECT_EQ(events.back().id, first);
+  EXPECT_EQ(events.back().version, 2);
+
+  // Later frames of the corrected keyframes go to the merged wall.
+  const std::vector<int> ids = seeWall(map, T_true, T_drifted, 6000, motion_at(6000));
+  ASSERT_FALSE(ids.empty());
+  EXPECT_EQ(ids.front(), first);
+  EXPECT_EQ(map.patches().size(), 1u);
+}
+
+// Two real walls 10 cm apart (a wall and a board hung on it) are not a place mapped twice: a
+// correction that leaves them where they are merges nothing.
+TEST(PatchCorrection, ParallelWallsACorrectionLeavesApartStaySeparate) {
+  PatchMap map(quickConfig());
+  seeWall(map, shifted(0.0, 0.0), shifted(0.0, 0.0), 1000);
+  map.endFrame(0);
+  seeWall(map, shifted(0.0, -0.1), shifted(0.0, 0.0), 5000);  // seen 10 cm nearer
+  map.endFrame(1);
+  ASSERT_EQ(map.patches().size(), 2u);
+  EXPECT_EQ(map.followCorrection([](std::int64_t t) {
+    return t >= 5000 ? shifted(0.02, 0.0) : core::Isometry::Identity();  // along the wall
+  }),
+            1u);
+  EXPECT_EQ(map.mergeCoinciding(), 0u);
+  EXPECT_EQ(map.patches().size(), 2u);
+}
+
+}  // namespace
+}  // namespace tessera::planes
