@@ -51,6 +51,16 @@ CLI::App* addEvalCommand(CLI::App& app, EvalArguments& args) {
                    "pixel whose captured depth disagrees with the map) are not compared")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
+  eval->add_option("--plane-offset-m", args.plane_offset_m,
+                   "With GT: a patch matches a true plane with its centroid this close to it "
+                   "(metres) ...")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  eval->add_option("--plane-normal-deg", args.plane_normal_deg,
+                   "... and its normal this close (degrees); wider bounds suit a large map "
+                   "tracked to centimetres")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
   addSourceOptions(*eval, args.source_args);
   return eval;
 }
@@ -62,7 +72,10 @@ int evalCommand(const EvalArguments& args) {
   }
   try {
     if (!args.ground_truth.empty()) {
-      printFigures(eval::evaluateRun(args.run_dir, args.ground_truth));
+      eval::PlaneEvaluationOptions planes;
+      planes.max_offset_m = args.plane_offset_m;
+      planes.max_normal_deg = args.plane_normal_deg;
+      printFigures(eval::evaluateRun(args.run_dir, args.ground_truth, planes));
     }
     if (!args.frames.empty()) {
       const std::unique_ptr<core::FrameSource> source = openSource(args.frames, args.source_args);

@@ -5,6 +5,7 @@
 #include <CLI/CLI.hpp>
 
 #include "source_factory.h"
+#include "tessera/eval/plane_evaluation.h"
 #include "tessera/eval/view_evaluation.h"
 
 namespace tessera::cli {
@@ -17,6 +18,8 @@ struct EvalArguments {
   std::string map_file = "patches.obj";  // --map
   int max_views = 20;
   int edge_margin_px = eval::ViewEvaluationOptions{}.edge_margin_px;
+  double plane_offset_m = eval::PlaneEvaluationOptions{}.max_offset_m;      // --plane-offset-m
+  double plane_normal_deg = eval::PlaneEvaluationOptions{}.max_normal_deg;  // --plane-normal-deg
   SourceArguments source_args;
 };
 

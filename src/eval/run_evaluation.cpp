@@ -152,7 +152,8 @@ std::unique_ptr<fusion::MeshColourSampler> meshBaseline(const std::filesystem::p
 }  // namespace
 
 nlohmann::json evaluateRun(const std::filesystem::path& run_dir,
-                           const std::filesystem::path& ground_truth) {
+                           const std::filesystem::path& ground_truth,
+                           const PlaneEvaluationOptions& plane_options) {
   const auto report_path = run_dir / "report.json";
   nlohmann::json report = readJson(report_path);
   const nlohmann::json gt = readJson(ground_truth);
@@ -190,12 +191,14 @@ nlohmann::json evaluateRun(const std::filesystem::path& run_dir,
   if (gt.contains("planes") && std::filesystem::exists(patches_path)) {
     PlaneEvaluation planes;
     try {
-      planes = evaluatePlanes(gt, truth_poses, readJson(patches_path), T_gt_est);
+      planes = evaluatePlanes(gt, truth_poses, readJson(patches_path), T_gt_est, plane_options);
     } catch (const core::Error& e) {
       throw core::Error(
           fmt::format("{} against {}: {}", patches_path.string(), ground_truth.string(), e.what()));
     }
     addPlaneFigures(planes, figures);
+    figures["plane_max_offset_m"] = plane_options.max_offset_m;
+    figures["plane_max_normal_deg"] = plane_options.max_normal_deg;
   }
   figures["gt_psnr_mean"] = nullptr;
   // Null unless the texture figures below can be computed (docs/METRICS.md).

@@ -5,6 +5,7 @@
 #include <nlohmann/json.hpp>
 
 #include "tessera/core/frame_source.h"
+#include "tessera/eval/plane_evaluation.h"
 #include "tessera/eval/view_evaluation.h"
 
 namespace tessera::eval {
@@ -13,8 +14,11 @@ namespace tessera::eval {
 // every ground-truth figure that tessera's stages make possible so far, writes them into
 // RUN_DIR/report.json (other ground-truth keys stay null) and returns them.
 // Throws core::Error naming the file that is missing or malformed.
+// `planes` sets the bounds within which a patch matches a true plane (a map of tens of metres
+// tracked to centimetres needs wider ones than a room); the figures name the bounds used.
 nlohmann::json evaluateRun(const std::filesystem::path& run_dir,
-                           const std::filesystem::path& ground_truth);
+                           const std::filesystem::path& ground_truth,
+                           const PlaneEvaluationOptions& planes = {});
 
 // View PSNR of a run (docs/METRICS.md): RUN_DIR/patches.obj and RUN_DIR/mesh.ply rendered at
 // the poses of RUN_DIR/trajectory.txt into the frames of `frames` (the source the run read),
