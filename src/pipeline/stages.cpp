@@ -273,8 +273,11 @@ FusedFrame PlaneStage::process(FusedFrame fused) {
         // The tracked pose, corrected for the drift measured against the patches so far; the
         // map holds it moved on by loop closure.
         fused.T_W_C_planes = correction_ * *fused.T_W_C;
-        const std::int64_t keyframe_ns = fused.keyframe_ns.value_or(fused.frame.timestamp_ns);
-        const core::Isometry loop = loopMotion(keyframe_ns);
+        // Only with loop closure do the planes keep which keyframes saw them.
+        const std::optional<std::int64_t> keyframe_ns =
+            loop_closer_ != nullptr ? fused.keyframe_ns : std::nullopt;
+        const core::Isometry loop = keyframe_ns ? loopMotion(*keyframe_ns)
+                                                : core::Isometry::Identity();
         const planes::PlaneDetection detection = detector_.detect(fused.frame);
         fused.planes_detected = detection.planes.size();
         std::vector<planes::PlaneObservation> observations =

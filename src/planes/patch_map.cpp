@@ -312,9 +312,11 @@ std::vector<int> PatchMap::add(const std::vector<PlaneObservation>& observations
     const int kept = planes.front();
     for (std::size_t m = planes.size(); m-- > 1;) mergePlane(kept, planes[m], ids);
     ids.push_back(placePoints(kept, observation.points_W, moments));
-    PlaneState::Observer& observer = planes_.at(kept).observers[observation.keyframe_ns];
-    observer.points += static_cast<double>(observation.points_W.size());
-    observer.motion = observation.loop_motion;
+    if (observation.keyframe_ns) {
+      PlaneState::Observer& observer = planes_.at(kept).observers[*observation.keyframe_ns];
+      observer.points += static_cast<double>(observation.points_W.size());
+      observer.motion = observation.loop_motion;
+    }
   }
   return ids;
 }

@@ -78,10 +78,11 @@ struct PlaneObservation {
   // its (u, v) frame and every bitmap on it show the surface as seen from the front, never
   // mirrored (a texture seen twice, or imported from a photo, then matches by a similarity).
   Eigen::Vector3d camera_W = Eigen::Vector3d::Zero();
-  // The time of the keyframe the frame was tracked after, and the loop-closure motion its
-  // points were moved by (identity before any loop): the plane they go to follows later
-  // corrections of that keyframe (followCorrection).
-  std::int64_t keyframe_ns = 0;
+  // With loop closure: the time of the keyframe the frame was tracked after, and the
+  // loop-closure motion its points were moved by (identity before any loop); the plane they go
+  // to follows later corrections of that keyframe (followCorrection). Without a keyframe the
+  // plane does not record them (its record grows by one entry per keyframe that saw it).
+  std::optional<std::int64_t> keyframe_ns;
   core::Isometry loop_motion = core::Isometry::Identity();
 };
 
