@@ -10,6 +10,7 @@
 #include <gtest/gtest.h>
 #include <opencv2/imgproc.hpp>
 
+#include "support/keyframe_record.h"
 #include "support/synthetic_office.h"
 #include "support/test_data.h"
 #include "tessera/core/registration.h"
@@ -30,17 +31,7 @@ synthetic::Scene scene(const char* name) {
 
 // The tracker's keyframe record of `frame`, posed at T_W_C.
 fusion::KeyframeRecord keyframeOf(const core::Frame& frame, const core::Isometry& T_W_C) {
-  fusion::KeyframeRecord record;
-  cv::Mat grey;
-  cv::cvtColor(core::registerColourToDepth(frame), grey, cv::COLOR_RGB2GRAY);
-  frame.depth_mm.convertTo(record.depth_m, CV_32F, 1e-3);
-  record.depth_m.setTo(std::numeric_limits<float>::quiet_NaN(), frame.depth_mm == 0);
-  record.features =
-      fusion::describeFeatures(grey, record.depth_m, frame.intrinsics, fusion::FeaturePoseConfig{});
-  record.timestamp_ns = static_cast<std::int64_t>(frame.index) * 33'333'333;
-  record.T_W_C = T_W_C;
-  record.intrinsics = frame.intrinsics;
-  return record;
+  return test::keyframeRecordOf(frame, T_W_C, static_cast<std::int64_t>(frame.index) * 33'333'333);
 }
 
 KeyframeView viewOf(const fusion::KeyframeRecord& record, int id, const LoopConfig& config) {

@@ -2,17 +2,17 @@
 // of path, the second fed as tracked with 12 cm and 2 degrees of drift. The planes the drifted
 // pass found double the first pass's; the loop graph's corrections, followed as the keyframes
 // come (as the plane stage does), bring them back onto them and merge them.
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <set>
 #include <vector>
 
 #include <gtest/gtest.h>
-#include <opencv2/imgproc.hpp>
 
+#include "support/keyframe_record.h"
 #include "support/synthetic_office.h"
 #include "support/test_data.h"
-#include "tessera/core/registration.h"
 #include "tessera/drivers/synthetic/scene.h"
 #include "tessera/loop/loop_graph.h"
 #include "tessera/planes/patch_map.h"
@@ -22,21 +22,6 @@ namespace tessera::loop {
 namespace {
 
 namespace synthetic = drivers::synthetic;
-
-fusion::KeyframeRecord keyframeOf(const core::Frame& frame, const core::Isometry& T_W_C,
-                                  std::int64_t timestamp_ns) {
-  fusion::KeyframeRecord record;
-  cv::Mat grey;
-  cv::cvtColor(core::registerColourToDepth(frame), grey, cv::COLOR_RGB2GRAY);
-  frame.depth_mm.convertTo(record.depth_m, CV_32F, 1e-3);
-  record.depth_m.setTo(std::numeric_limits<float>::quiet_NaN(), frame.depth_mm == 0);
-  record.features =
-      fusion::describeFeatures(grey, record.depth_m, frame.intrinsics, fusion::FeaturePoseConfig{});
-  record.timestamp_ns = timestamp_ns;
-  record.T_W_C = T_W_C;
-  record.intrinsics = frame.intrinsics;
-  return record;
-}
 
 struct PlaneFigure {
   Eigen::Vector3d normal;
@@ -94,7 +79,7 @@ TEST(LoopMap, ADriftedSecondPassMergesIntoTheFirstPassPlanesOnceTheLoopCloses) {
       const core::Isometry tracked = pass == 0 ? truth : core::Isometry(drift * truth);
       const core::Frame image = test::officeFrameAt(office, truth, 1000 * pass + frame);
       const std::int64_t keyframe_ns = index * 1'000'000'000LL;
-      graph.add(keyframeOf(image, tracked, keyframe_ns));
+      graph.add(test::keyframeRecordOf(image, tracked, keyframe_ns));
       if (graph.stats().optimisations != followed_generation) {
         followed_generation = graph.stats().optimisations;
         correction = graph.correction();
