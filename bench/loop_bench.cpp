@@ -73,11 +73,13 @@ int main(int argc, char** argv) {
                s.keyframes, tracking_ms / static_cast<double>(std::max<std::size_t>(1, frames)));
     fmt::print(
         "loop closure: {:.1f} ms/keyframe ({:.1f} ms/frame): information {:.1f}, place lookup "
-        "{:.1f}, checks {:.1f} ms/keyframe; pose graph {} runs, {:.0f} ms in all\n",
+        "{:.1f}, place index {:.1f}, checks {:.1f} ms/keyframe; pose graph {} runs, {:.0f} ms in "
+        "all\n",
         s.keyframe_ms / static_cast<double>(std::max<std::size_t>(1, s.keyframes)),
         s.keyframe_ms / static_cast<double>(std::max<std::size_t>(1, frames)),
         s.information_ms / static_cast<double>(std::max<std::size_t>(1, s.keyframes)),
         s.place_lookup_ms / static_cast<double>(std::max<std::size_t>(1, s.keyframes)),
+        s.place_index_ms / static_cast<double>(std::max<std::size_t>(1, s.keyframes)),
         s.verification_ms / static_cast<double>(std::max<std::size_t>(1, s.keyframes)), s.optimisations,
         s.pose_graph_ms);
     fmt::print(

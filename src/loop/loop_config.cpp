@@ -12,6 +12,7 @@ void readConfig(const core::ConfigSection& section, LoopConfig& config) {
   section.read("min_votes", config.min_votes);
   section.read("candidates_per_query", config.candidates_per_query);
   section.read("query_descriptors", config.query_descriptors);
+  section.read("query_every_n_keyframes", config.query_every_n_keyframes);
   section.read("max_view_distance_m", config.max_view_distance_m);
   section.read("max_drift_fraction", config.max_drift_fraction);
   section.read("max_drift_m", config.max_drift_m);
@@ -31,7 +32,8 @@ void readConfig(const core::ConfigSection& section, LoopConfig& config) {
   section.read("node_spacing_deg", config.node_spacing_deg);
   if (config.min_travel_m < 0.0 || config.max_descriptor_distance < 0 ||
       config.neighbours_per_descriptor < 1 || config.min_votes < 1 ||
-      config.candidates_per_query < 1 || config.query_descriptors < 1 || config.confirm_within_keyframes < 0 ||
+      config.candidates_per_query < 1 || config.query_descriptors < 1 ||
+      config.query_every_n_keyframes < 1 || config.confirm_within_keyframes < 0 ||
       config.dense_stride < 1 || config.icp_distance_m <= 0.0 || config.dense_max_depth_m <= 0.0 || config.min_fitness < 0.0 ||
       config.min_fitness > 1.0 || config.edge_prune_threshold < 0.0 ||
       config.edge_prune_threshold > 1.0 || config.node_spacing_m < 0.0 ||

@@ -119,11 +119,16 @@ void LoopGraph::add(const fusion::KeyframeRecord& record, bool depth_thinned) {
   place.newest_allowed = static_cast<int>(last_far - keyframes_.begin()) - 1;
   const auto lookup_start = std::chrono::steady_clock::now();
   std::vector<PlaceCandidate> candidates;
-  if (place.newest_allowed >= 0) {
+  const bool following_revisit = last_revisit_query_ >= 0 &&
+                                 query.id - last_revisit_query_ <= config_.confirm_within_keyframes;
+  const bool lookup = following_revisit || query.id % config_.query_every_n_keyframes == 0;
+  if (lookup && place.newest_allowed >= 0) {
     candidates = index_.query(strongestDescriptors(query.features, config_.query_descriptors), place);
   }
-  index_.add(query.id, query.features.descriptors);
   stats_.place_lookup_ms += msSince(lookup_start);
+  const auto index_start = std::chrono::steady_clock::now();
+  index_.add(query.id, query.features.descriptors);
+  stats_.place_index_ms += msSince(index_start);
 
   for (const PlaceCandidate& candidate : candidates) {
     if (!withinView(candidate.keyframe, query.id)) continue;
@@ -135,6 +140,7 @@ void LoopGraph::add(const fusion::KeyframeRecord& record, bool depth_thinned) {
     stats_.verification_ms += msSince(verify_start);
     if (!revisit) continue;
     ++stats_.revisits_verified;
+    last_revisit_query_ = query.id;
     if (!withinDrift(candidate.keyframe, query.id, *revisit)) {
       ++stats_.rejected_as_drift;
       spdlog::debug("loop: keyframe {} -> {} rejected: more correction than drift explains",

@@ -14,7 +14,7 @@ namespace {
 // LSH parameters: 6 hash tables with 14-bit keys, no multi-probe. Measured on the loop scene
 // (600 frames): 12 tables of 20 bits with multi-probe 2 took 402 ms a lookup, these 12 ms, for
 // about as many candidates (292 against 298) and verified revisits (25 against 24).
-constexpr int kTables = 6, kKeyBits = 14, kProbeLevel = 0, kChecks = 32;
+constexpr int kTables = 4, kKeyBits = 20, kProbeLevel = 0, kChecks = 32;
 }  // namespace
 
 PlaceIndex::PlaceIndex(std::size_t batch_keyframes)

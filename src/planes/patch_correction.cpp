@@ -98,8 +98,13 @@ std::optional<std::pair<int, int>> PatchMap::findCoinciding() const {
     }
     for (const auto& [into_id, older] : planes_) {
       if (into_id >= from_id) break;
+      if (older.moments.count < 3.0) continue;
+      // The allowance for a bent plane grows with the distance from where the older plane's
+      // fit is anchored (its centroid).
+      const double bend_m = std::tan(config_.merge_bend_deg * M_PI / 180.0) *
+                            (fit.centroid - fitPlane(older.moments).centroid).norm();
       const bool continued = std::any_of(patches_.begin(), patches_.end(), [&](const Patch& tile) {
-        return tile.plane == into_id && continues(tile, fit, centres);
+        return tile.plane == into_id && continues(tile, fit, centres, bend_m);
       });
       if (continued) return std::make_pair(into_id, from_id);
     }

@@ -54,13 +54,14 @@ double PatchMap::areaM2(const Patch& patch) const {
 }
 
 bool PatchMap::continues(const Patch& patch, const PlaneFit& region,
-                         const std::vector<Eigen::Vector3d>& points) const {
+                         const std::vector<Eigen::Vector3d>& points, double extra_offset_m) const {
   // Planes are compared as unoriented: a region seen from the other side is the same plane.
   const double cos_angle = std::abs(patch.normal.dot(region.normal));
   if (cos_angle < std::cos(config_.max_normal_angle_deg * M_PI / 180.0)) return false;
   // The region's centroid must lie near the patch's plane. (Comparing plane offsets instead
   // would magnify a small tilt by the distance from the world origin.)
-  if (std::abs(patch.normal.dot(region.centroid) - patch.offset) > config_.max_offset_m) {
+  if (std::abs(patch.normal.dot(region.centroid) - patch.offset) >
+      config_.max_offset_m + extra_offset_m) {
     return false;
   }
   // Touching: a point falls in or next to an occupied cell. Points come in raster order, so

@@ -443,6 +443,7 @@ TEST(RunConfig, DefaultYamlDocumentsEveryKeyWithTheStructDefaults) {
   EXPECT_EQ(from_file.planes.max_depth_m, defaults.planes.max_depth_m);
   EXPECT_EQ(from_file.patches.max_normal_angle_deg, defaults.patches.max_normal_angle_deg);
   EXPECT_EQ(from_file.patches.max_offset_m, defaults.patches.max_offset_m);
+  EXPECT_EQ(from_file.patches.merge_bend_deg, defaults.patches.merge_bend_deg);
   EXPECT_EQ(from_file.patches.cell_m, defaults.patches.cell_m);
   EXPECT_EQ(from_file.patches.stable_frames, defaults.patches.stable_frames);
   EXPECT_EQ(from_file.patches.max_growth, defaults.patches.max_growth);
@@ -472,6 +473,7 @@ TEST(RunConfig, DefaultYamlDocumentsEveryKeyWithTheStructDefaults) {
   EXPECT_EQ(loop.min_votes, loop_default.min_votes);
   EXPECT_EQ(loop.candidates_per_query, loop_default.candidates_per_query);
   EXPECT_EQ(loop.query_descriptors, loop_default.query_descriptors);
+  EXPECT_EQ(loop.query_every_n_keyframes, loop_default.query_every_n_keyframes);
   EXPECT_EQ(loop.max_view_distance_m, loop_default.max_view_distance_m);
   EXPECT_EQ(loop.max_drift_fraction, loop_default.max_drift_fraction);
   EXPECT_EQ(loop.max_drift_m, loop_default.max_drift_m);

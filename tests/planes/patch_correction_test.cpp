@@ -130,5 +130,24 @@ TEST(PatchCorrection, ParallelWallsACorrectionLeavesApartStaySeparate) {
   EXPECT_EQ(map.patches().size(), 2u);
 }
 
+// One fit cannot follow a long plane that tracking drift bent: a piece 4 cm off it, at its far
+// end, merges after a correction; the same 4 cm near the plane's centroid is a step and stays.
+TEST(PatchCorrection, APieceOfABentPlaneMergesAtItsFarEndButNotNearItsCentroid) {
+  const auto seeLongWall = [](PatchMap& map) {
+    for (int i = 0; i <= 8; ++i) seeWall(map, shifted(i, 0.0), shifted(i, 0.0), 1000 * i);
+    map.endFrame(0);
+    return map.patches().size();
+  };
+  for (const double piece_x : {9.0, 4.0}) {
+    PatchMap map(quickConfig());
+    const std::size_t wall_patches = seeLongWall(map);
+    seeWall(map, shifted(piece_x, 0.0), shifted(piece_x, -0.04), 9000);  // 4 cm nearer
+    map.endFrame(1);
+    ASSERT_GT(map.patches().size(), wall_patches) << "the piece 4 cm off makes a plane of its own";
+    const bool far_end = piece_x > 8.0;
+    EXPECT_EQ(map.mergeCoinciding(), far_end ? 1u : 0u) << "piece at x = " << piece_x;
+  }
+}
+
 }  // namespace
 }  // namespace tessera::planes

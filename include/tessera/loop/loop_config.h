@@ -19,6 +19,10 @@ struct LoopConfig {
   int candidates_per_query = 2;  // the most voted, checked geometrically in turn
   // The query's strongest descriptors that vote (ORB's response); fewer keep the lookup cheap.
   int query_descriptors = 300;
+  // Only every n-th keyframe looks itself up, unless a revisit was verified within the last
+  // confirm_within_keyframes keyframes: a revisit lasts many keyframes, so stepping over some
+  // finds it as surely, and once found every keyframe follows it up (and confirms it).
+  int query_every_n_keyframes = 2;
   // A candidate is checked only if its corrected position lies within the drift bound plus
   // this distance of the query's (two views of one place are a few metres apart at most).
   double max_view_distance_m = 3.0;

@@ -43,7 +43,8 @@ struct LoopStats {
   double pose_graph_ms = 0.0;  // all optimisations together
   double keyframe_ms = 0.0;    // all keyframes' work together, optimisations included
   double information_ms = 0.0;   // odometry edges' information matrices
-  double place_lookup_ms = 0.0;  // place recognition
+  double place_lookup_ms = 0.0;  // place recognition: the lookups
+  double place_index_ms = 0.0;   // ... and adding keyframes to the index
   double verification_ms = 0.0;  // geometric checks of candidates
   std::size_t rejected() const {
     return rejected_as_drift + rejected_unconfirmed + rejected_by_graph;
@@ -107,6 +108,7 @@ class LoopGraph {
   std::vector<GraphEdge> odometry_;
   std::vector<LoopEdge> loops_;
   std::vector<Pending> pending_;
+  int last_revisit_query_ = -1;  // the last keyframe whose lookup verified a revisit
   bool dirty_ = false;  // loops added since the last optimisation
   LoopStats stats_;
 };

@@ -33,6 +33,10 @@ namespace tessera::planes {
 struct PatchMapConfig {
   double max_normal_angle_deg = 5.0;  // a region continues a patch only this close in normal
   double max_offset_m = 0.03;         // ... and with its centroid this close to its plane
+  // After a loop closure, a plane merges into an older one it continues. One fit cannot follow
+  // a floor that tracking drift bent over metres, so there the offset bound grows by
+  // tan(merge_bend_deg) per metre from the older plane's centroid.
+  double merge_bend_deg = 0.3;
   double cell_m = 0.05;               // occupancy grid cell in the plane
   // Finalization: a patch in view is stable once its area grew by at most max_growth (a
   // fraction) over its last stable_frames frames in view; a patch not seen for
@@ -220,8 +224,9 @@ class PatchMap {
   const PatchMapConfig& config() const { return config_; }
   // Whether a region (its least-squares plane and points, world frame) continues `patch`:
   // normal and centroid within the bounds, touching its cells (the tile's).
+  // `extra_offset_m` widens the offset bound (a merge after loop closure).
   bool continues(const Patch& patch, const PlaneFit& region,
-                 const std::vector<Eigen::Vector3d>& points) const;
+                 const std::vector<Eigen::Vector3d>& points, double extra_offset_m = 0.0) const;
   std::size_t liveCount() const;       // not finalized in their current state
   std::size_t finalizedCount() const;  // finalized, in their current version
   Outline outlineOf(const Patch& patch) const { return traceOutline(patch.cells, config_.cell_m); }
