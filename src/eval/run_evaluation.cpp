@@ -232,8 +232,15 @@ nlohmann::json evaluateRunViews(const std::filesystem::path& run_dir, core::Fram
   const RenderMesh patches = readTexturedMap(run_dir / options.map_file);
   const RenderMesh mesh = readColouredPly(run_dir / "mesh.ply");
   const Trajectory poses = readTumTrajectory(run_dir / "trajectory.txt");
-  const ViewEvaluation views =
-      evaluateViews({{"patches", &patches}, {"mesh", &mesh}}, frames, poses, options);
+  // After a loop closure the patch map lies in the frame of the corrected poses; the TSDF
+  // mesh stays in the tracked one.
+  const auto closed_path = run_dir / "trajectory_closed.txt";
+  const std::optional<Trajectory> closed =
+      std::filesystem::exists(closed_path) ? std::optional(readTumTrajectory(closed_path))
+                                           : std::nullopt;
+  const ViewEvaluation views = evaluateViews(
+      {{"patches", &patches, closed ? &*closed : nullptr}, {"mesh", &mesh, nullptr}}, frames,
+      poses, options);
   if (views.views.empty()) {
     throw core::Error(fmt::format(
         "{}: no view could be scored: none of its frames has a pose in {} with patches in "

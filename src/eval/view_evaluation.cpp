@@ -166,14 +166,19 @@ ViewEvaluation evaluateViews(const std::vector<ViewModel>& models, core::FrameSo
     const bool held_out = isHeldOut(frame.index, options.holdout_every);
     const std::size_t position = seen[held_out ? 1 : 0]++;
     if (position % (held_out ? held_out_stride : train_stride) != 0) continue;
-    const std::optional<core::Isometry> T_W_C = poseAt(poses, frame.timestamp_ns);
-    if (!T_W_C) continue;
+    std::vector<core::Isometry> T_W_C;  // per model
+    for (const ViewModel& model : models) {
+      const auto pose = poseAt(model.poses != nullptr ? *model.poses : poses, frame.timestamp_ns);
+      if (!pose) break;
+      T_W_C.push_back(*pose);
+    }
+    if (T_W_C.size() < models.size()) continue;
     if (frame.colour_camera) frame = core::withRegisteredColour(std::move(frame));
     if (frame.rgb.empty() || frame.depth_mm.empty()) continue;
 
     std::vector<ViewImage> renders;
-    for (const ViewModel& model : models) {
-      renders.push_back(renderView(*model.mesh, frame.intrinsics, *T_W_C));
+    for (std::size_t m = 0; m < models.size(); ++m) {
+      renders.push_back(renderView(*models[m].mesh, frame.intrinsics, T_W_C[m]));
     }
     cv::Mat mask = confirmedCoverage(renders[0], frame, options);
     for (std::size_t m = 1; m < renders.size(); ++m) mask &= renders[m].depth > 0.0F;

@@ -25,6 +25,9 @@ bool isHeldOut(std::uint64_t index, int holdout_every);
 struct ViewModel {
   std::string name;
   const RenderMesh* mesh = nullptr;
+  // The poses of the frame the mesh lies in, when not the shared ones (after a loop closure
+  // the patch map lies in the corrected frame, the TSDF mesh in the tracked one).
+  const Trajectory* poses = nullptr;
 };
 
 struct ViewEvaluationOptions {
