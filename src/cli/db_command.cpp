@@ -1,7 +1,9 @@
 #include "db_command.h"
 
+#include <chrono>
 #include <filesystem>
 #include <fstream>
+#include <thread>
 
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
@@ -9,9 +11,11 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "stop_request.h"
 #include "tessera/core/error.h"
 #include "tessera/db/texture_store.h"
 #include "tessera/match/match_cascade.h"
+#include "tessera/monitor/monitor_server.h"
 #include "tessera/pipeline/run_config.h"
 #include "tessera/texture/bitmap_export.h"
 #include "texture_image.h"
@@ -179,6 +183,22 @@ int stats(const db::TextureStore& store, bool json) {
   return 0;
 }
 
+// The monitor's server over the database alone: the page shows the gallery, no run.
+int serve(const DbArguments& args) {
+  const pipeline::MapMonitor idle;
+  monitor::MonitorServerOptions options;
+  options.listen = monitor::parseListenAddress(args.listen);
+  options.token = args.token;
+  options.db = args.db;
+  monitor::MonitorServer server(idle, options);
+  spdlog::info("serving {} on {}{}; Ctrl-C stops", args.db, server.url(),
+               args.token.empty() ? "" : " (bearer token required)");
+  const std::atomic<bool>& stop = stopOnInterrupt();
+  while (!stop) std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  server.stop();
+  return 0;
+}
+
 }  // namespace
 
 CLI::App* addDbCommand(CLI::App& app, DbArguments& args) {
@@ -213,6 +233,18 @@ CLI::App* addDbCommand(CLI::App& app, DbArguments& args) {
   CLI::App* st = db->add_subcommand("stats", "Schema version, counts and sizes");
   add_db(st);
   st->add_flag("--json", args.json, "Print a JSON object");
+  CLI::App* serve = db->add_subcommand(
+      "serve", "Browse the database in a web browser (the run monitor's page, without a run) "
+               "until Ctrl-C");
+  add_db(serve);
+  serve->add_option("--listen", args.listen,
+                    "[ADDR:]PORT to serve on (ADDR 127.0.0.1 unless given; PORT 0 picks a free "
+                    "one)")
+      ->capture_default_str();
+  serve->add_option("--token", args.token,
+                    "Require this bearer token on every request (also read from "
+                    "TESSERA_MONITOR_TOKEN)")
+      ->envname("TESSERA_MONITOR_TOKEN");
   return db;
 }
 
@@ -226,6 +258,7 @@ int dbCommand(const CLI::App& db, const DbArguments& args) {
     if (parsed("show")) return show(*store, args.texture_id, args.json);
     if (parsed("export")) return exportAll(*store, args.out_dir);
     if (parsed("import")) return import(*store, args);
+    if (parsed("serve")) return serve(args);
     return stats(*store, args.json);
   } catch (const core::Error& e) {
     spdlog::error("{}", e.what());

@@ -1,5 +1,5 @@
 #pragma once
-// `tessera db list|show|export|import|stats DB`: look into and fill a texture database.
+// `tessera db list|show|export|import|stats|serve DB`: look into and fill a texture database.
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -16,6 +16,8 @@ struct DbArguments {
   bool pattern = false;             // import: each image is one tile of a repeating pattern
   std::string config;               // import: the match: settings its descriptions follow
   bool json = false;                // list, show, stats: one JSON object instead of text
+  std::string listen = "8080";      // serve: [ADDR:]PORT
+  std::string token;                // serve: bearer token required when not empty
 };
 
 // Adds `db` with its subcommands; returns the `db` command.

@@ -1,5 +1,7 @@
 #include "run_command.h"
 
+#include <memory>
+
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 #include <opencv2/core/utility.hpp>
@@ -8,6 +10,7 @@
 #include "source_factory.h"
 #include "stop_request.h"
 #include "tessera/core/error.h"
+#include "tessera/monitor/monitor_server.h"
 #include "tessera/pipeline/flow_graph.h"
 #include "tessera/pipeline/run.h"
 
@@ -50,6 +53,16 @@ CLI::App* addRunCommand(CLI::App& app, RunArguments& args) {
   run->add_option("--record", args.source_args.record_path,
                   "Live devices: also record what the device sends to this .oni file "
                   "(OpenNI2's Recorder, lossless; replays with `tessera run FILE`)");
+  run->add_option("--monitor", args.monitor,
+                  "Serve the run's figures over HTTP on [ADDR:]PORT (ADDR 127.0.0.1 unless "
+                  "given; PORT 0 picks a free one): / (live page), /metrics (Prometheus), /stats "
+                  "(JSON), /events (server-sent events), /textures (docs/MONITOR.md)");
+  run->add_option("--monitor-token", args.monitor_token,
+                  "Require this bearer token on every monitor request (also read from "
+                  "TESSERA_MONITOR_TOKEN, which keeps it out of the process list)")
+      ->envname("TESSERA_MONITOR_TOKEN");
+  run->add_flag("--quiet", args.quiet,
+                "No progress line on a terminal, nor periodic progress lines in a log");
   addSourceOptions(*run, args.source_args);
   return run;
 }
@@ -65,8 +78,21 @@ int runCommand(const RunArguments& args) {
 
     const int threads = args.threads > 0 ? args.threads : pipeline::defaultThreadCount();
     cv::setNumThreads(threads);
-    ProgressLine progress;
+    pipeline::MapMonitor monitor;
+    ProgressLine progress(&monitor, args.quiet);
+    std::unique_ptr<monitor::MonitorServer> server;
+    if (!args.monitor.empty()) {
+      monitor::MonitorServerOptions server_options;
+      server_options.listen = monitor::parseListenAddress(args.monitor);
+      server_options.token = args.monitor_token;
+      server_options.db = args.db.empty() ? (std::filesystem::path(args.out_dir) / "textures.db").string()
+                                          : args.db;
+      server = std::make_unique<monitor::MonitorServer>(monitor, server_options);
+      spdlog::info("monitor: {}{}", server->url(),
+                   args.monitor_token.empty() ? "" : " (bearer token required)");
+    }
     pipeline::RunOptions run_options;
+    run_options.monitor = &monitor;
     run_options.out_dir = args.out_dir;
     run_options.threads = threads;
     run_options.poses =

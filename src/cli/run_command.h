@@ -18,6 +18,9 @@ struct RunArguments {
   int holdout_every = 0;
   bool residual = false;
   std::string db;
+  std::string monitor;        // [ADDR:]PORT of the HTTP monitor; empty: none
+  std::string monitor_token;  // required by the monitor when not empty
+  bool quiet = false;         // no progress line or periodic progress log
   SourceArguments source_args;
 };
 

@@ -120,8 +120,15 @@ void runGraph(SourceStage& source, TrackingStage& tracking, IntegrationStage& in
           std::optional<texture::PatchBitmap> bitmap = described.bitmap;
           const CommitRecord record = committer.process(std::move(described));
           textures.keep(std::move(bitmap));
-          sink.writeCommit(record, batch.index, batch.size, batch.frame_index,
-                           committer.texturesStored());
+          const CommitStage::Economy economy = committer.economy();
+          MonitorCommit totals;
+          totals.textures_stored = committer.texturesStored();
+          totals.patterns_stored = committer.patternsStored();
+          totals.textured_patches = economy.textured_patches;
+          totals.reuses = economy.reuses;
+          totals.bytes_before = economy.bytes_before;
+          totals.bytes_after = economy.bytes_after;
+          sink.writeCommit(record, batch.index, batch.size, batch.frame_index, totals);
           return flow::continue_msg{};
         });
     flow::sequencer_node<Numbered<FusedFrame>> to_sink(graph, numbered);

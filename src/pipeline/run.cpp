@@ -149,6 +149,11 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
   TextureStage texture_stage(config.textures, options.out_dir);
   StatsSink sink(options.out_dir, total, options.on_progress,
                  [&texture_stage] { return texture_stage.bitmapBytes(); });
+  if (options.monitor != nullptr) {
+    sink.attachMonitor(options.monitor,
+                       [&source_stage] { return source_stage.framesDroppedSoFar(); });
+    options.monitor->start(source.name());
+  }
   // Without --db the run starts its own database, replacing one an earlier run left in OUT.
   const std::string db_location =
       options.db ? *options.db : (options.out_dir / "textures.db").string();
@@ -265,10 +270,11 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
   summary.peak_rss_mb = peakRssMb();
   summary.rss_growth_mb_per_1000_frames = sink.rssGrowthMbPer1000Frames();
   writeReport(summary, options.out_dir / "report.json");
+  if (options.monitor != nullptr) options.monitor->finish(reportJson(summary));
   return summary;
 }
 
-void writeReport(const RunSummary& summary, const std::filesystem::path& path) {
+nlohmann::json reportJson(const RunSummary& summary) {
   using nlohmann::json;
   json report = {
       {"source", summary.source},
@@ -398,9 +404,12 @@ void writeReport(const RunSummary& summary, const std::filesystem::path& path) {
                           {"alone_fps", stage.alone_fps}};
   }
   report["stages"] = stages;
+  return report;
+}
 
+void writeReport(const RunSummary& summary, const std::filesystem::path& path) {
   std::ofstream out(path);
-  out << report.dump(2) << '\n';
+  out << reportJson(summary).dump(2) << '\n';
   out.close();
   if (!out) {
     throw core::Error(fmt::format("{}: could not write the report (disk full?)", path.string()));

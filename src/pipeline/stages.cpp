@@ -55,6 +55,7 @@ std::optional<core::Frame> SourceStage::read() {
       ScopedStageTime time(timer_);
       result = source_.read();
     }
+    if (source_.isLive()) frames_dropped_so_far_ = source_.liveStats().frames_dropped;
     switch (result.status) {
       case core::ReadStatus::kFrame:
         ++frames_read_;
@@ -510,9 +511,31 @@ void StatsSink::process(const FusedFrame& fused) {
                     stats_path_.string());
     }
   }
+  if (monitor_ != nullptr) {
+    MonitorFrame frame;
+    frame.elapsed_s = elapsed_s;
+    frame.frames_done = frames_done_;
+    frame.frames_total = frames_total_;
+    frame.frames_dropped = frames_dropped_ ? frames_dropped_() : 0;
+    frame.latency_ms = fused.latency_ms;
+    frame.tracking_ms = fused.tracking_ms;
+    frame.integration_ms = fused.integration_ms;
+    frame.planes_ms = fused.planes_ms;
+    frame.tsdf_bytes = fused.tsdf_bytes;
+    frame.bitmap_bytes = bitmap_bytes;
+    frame.map_bytes = map_bytes_;
+    frame.patches_live = fused.patches_live;
+    frame.patches_finalized = fused.patches_finalized;
+    monitor_->onFrame(frame);
+  }
   if (on_progress_) {
     on_progress_({frames_done_, frames_total_, elapsed_s, map_bytes_, fused.latency_ms});
   }
+}
+
+void StatsSink::attachMonitor(MapMonitor* monitor, std::function<std::size_t()> frames_dropped) {
+  monitor_ = monitor;
+  frames_dropped_ = std::move(frames_dropped);
 }
 
 void StatsSink::writePatchEvents(const std::vector<planes::PatchEvent>& events) {
@@ -530,7 +553,19 @@ void StatsSink::writePatchEvents(const std::vector<planes::PatchEvent>& events) 
 }
 
 void StatsSink::writeCommit(const CommitRecord& record, std::size_t batch, std::size_t batch_size,
-                            std::uint64_t frame_index, std::size_t textures_stored) {
+                            std::uint64_t frame_index, const MonitorCommit& totals) {
+  const std::size_t textures_stored = totals.textures_stored;
+  if (monitor_ != nullptr) {
+    MonitorCommit commit = totals;
+    commit.committed = record.instance.has_value();
+    commit.reused = record.instance && record.instance->reused;
+    commit.bitmap_ms = record.bitmap_ms;
+    commit.match_ms = record.match_ms;
+    commit.commit_latency_ms = record.commit_latency_ms;
+    commit.ccv_considered = record.ccv_considered;
+    commit.ccv_removed = record.ccv_removed;
+    monitor_->onCommit(commit);
+  }
   std::lock_guard lock(write_mutex_);
   textures_stored_ = textures_stored;
   BatchCounts& counts = batches_[batch];

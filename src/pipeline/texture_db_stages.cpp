@@ -1,6 +1,7 @@
 #include "tessera/pipeline/texture_db_stages.h"
 
 #include <algorithm>
+#include <set>
 
 #include <spdlog/spdlog.h>
 #include <opencv2/core.hpp>
@@ -370,6 +371,7 @@ CommitRecord CommitStage::process(DescribedPatch described) {
     }
   }
   instances_[bitmap.id] = commit.instances;
+  patch_pixels_[bitmap.id] = bitmap.grid.texels();
   record.instance = commit.instances.front();
   record.overlays.assign(commit.instances.begin() + 1, commit.instances.end());
   record.commit_latency_ms = msSince(described.finalized_at);
@@ -389,7 +391,25 @@ void CommitStage::retire(int patch_id) {
     ++commit_failures_;
   }
   instances_.erase(patch_id);
+  patch_pixels_.erase(patch_id);
   ++retirements_;
+}
+
+CommitStage::Economy CommitStage::economy() const {
+  Economy economy;
+  std::set<std::int64_t> shown;
+  for (const auto& [patch_id, layers] : instances_) {
+    if (layers.empty()) continue;
+    economy.textured_patches += 1;
+    economy.reuses += layers.front().reused ? 1 : 0;
+    economy.bytes_before += 3 * patch_pixels_.at(patch_id);
+    for (const db::TextureInstance& layer : layers) {
+      if (shown.insert(layer.texture_id).second) {
+        economy.bytes_after += 3 * texture_pixels_.at(layer.texture_id);
+      }
+    }
+  }
+  return economy;
 }
 
 }  // namespace tessera::pipeline

@@ -6,6 +6,8 @@
 #include <optional>
 #include <string>
 
+#include <nlohmann/json.hpp>
+
 #include "tessera/core/frame_source.h"
 #include "tessera/eval/trajectory.h"
 #include "tessera/loop/loop_graph.h"
@@ -25,6 +27,8 @@ struct RunOptions {
   // not given. A postgresql:// URL is refused until that backend exists.
   std::optional<std::string> db;
   StatsSink::ProgressCallback on_progress;  // may be empty
+  // Updated with every frame and commit, and given report.json at the end (may be null).
+  MapMonitor* monitor = nullptr;
   const std::atomic<bool>* stop = nullptr;  // set (e.g. by Ctrl-C) to end the stream early
 };
 
@@ -116,7 +120,9 @@ struct RunSummary {
 RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
                        const RunOptions& options);
 
-// Writes the report.json object (docs/METRICS.md): figures this stage cannot compute are null.
+// The report.json object (docs/METRICS.md): figures this stage cannot compute are null.
+nlohmann::json reportJson(const RunSummary& summary);
+// Writes reportJson(summary) to `path`; throws core::Error when it cannot.
 void writeReport(const RunSummary& summary, const std::filesystem::path& path);
 
 // Peak resident set size of this process so far, in MB.

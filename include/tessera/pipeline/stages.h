@@ -19,6 +19,7 @@
 #include "tessera/fusion/tracker.h"
 #include "tessera/fusion/tsdf_map.h"
 #include "tessera/loop/loop_closer.h"
+#include "tessera/pipeline/map_monitor.h"
 #include "tessera/pipeline/stage_timer.h"
 #include "tessera/planes/frame_sharpness.h"
 #include "tessera/planes/patch_export.h"
@@ -50,6 +51,8 @@ class SourceStage {
   const std::string& endProblem() const { return end_problem_; }
   // The live source's counts when its stream ended (a device keeps sending after that).
   const core::LiveStats& liveStatsAtEnd() const { return live_stats_at_end_; }
+  // Frames a live source dropped up to its last read; safe to call from any thread.
+  std::size_t framesDroppedSoFar() const { return frames_dropped_so_far_.load(); }
   const StageTimer& timer() const { return timer_; }
 
  private:
@@ -63,6 +66,7 @@ class SourceStage {
   bool stopped_on_request_ = false;
   std::string end_problem_;
   core::LiveStats live_stats_at_end_;
+  std::atomic<std::size_t> frames_dropped_so_far_{0};
   StageTimer timer_;
 };
 
@@ -304,8 +308,13 @@ class StatsSink {
   // One line per committed patch ({"type":"patch","event":"committed",...}) and, once every
   // patch of its batch (the patches one frame finalized) is in, one {"type":"match",...} line
   // with the batch's CCV prefilter counts. Called by the commit node, beside process().
+  // `totals`: the run's figures after this commit, for the monitor (textures_stored and
+  // patterns_stored also go into the lines).
   void writeCommit(const CommitRecord& record, std::size_t batch, std::size_t batch_size,
-                   std::uint64_t frame_index, std::size_t textures_stored);
+                   std::uint64_t frame_index, const MonitorCommit& totals);
+  // Every frame and commit also updates `monitor` (may be null); `frames_dropped` says how many
+  // frames a live source has dropped so far.
+  void attachMonitor(MapMonitor* monitor, std::function<std::size_t()> frames_dropped);
   // Closes the files; throws core::Error naming one whose writing failed (disk full).
   void flush();
 
@@ -330,6 +339,8 @@ class StatsSink {
   std::optional<std::size_t> frames_total_;
   ProgressCallback on_progress_;
   std::function<std::size_t()> bitmap_bytes_;
+  MapMonitor* monitor_ = nullptr;
+  std::function<std::size_t()> frames_dropped_;
   std::chrono::steady_clock::time_point start_;
   std::size_t frames_done_ = 0;
   std::size_t map_bytes_ = 0;

@@ -226,6 +226,13 @@ class CommitStage {
   const std::map<std::int64_t, std::size_t>& texturePixels() const { return texture_pixels_; }
   std::size_t texturesStored() const { return textures_stored_; }
   std::size_t patternsStored() const { return patterns_stored_; }
+  // The map's committed patches now: how many, how many reuse a texture, their bitmaps' bytes
+  // and the bytes of the distinct textures they show (layers included). The live counterpart
+  // of report.json's economy, which also counts bitmaps never committed.
+  struct Economy {
+    std::size_t textured_patches = 0, reuses = 0, bytes_before = 0, bytes_after = 0;
+  };
+  Economy economy() const;
   std::size_t commitFailures() const { return commit_failures_; }
   std::size_t ccvConsidered() const { return ccv_considered_; }
   std::size_t ccvRemoved() const { return ccv_removed_; }
@@ -257,6 +264,7 @@ class CommitStage {
   std::int64_t run_id_;
   std::map<int, std::vector<db::TextureInstance>> instances_;
   std::map<std::int64_t, std::size_t> texture_pixels_;
+  std::map<int, std::size_t> patch_pixels_;  // texels of each committed patch's bitmap
   std::size_t textures_stored_ = 0, patterns_stored_ = 0, commit_failures_ = 0, retirements_ = 0;
   std::size_t ccv_considered_ = 0, ccv_removed_ = 0;
   std::vector<double> commit_latencies_ms_;
