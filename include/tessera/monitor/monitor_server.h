@@ -29,7 +29,7 @@ struct MonitorServerOptions {
   std::string token;
   // The texture database /textures lists (opened read-only when first asked); none: empty.
   std::optional<std::string> db;
-  std::size_t max_event_streams = 32;  // more /events clients at once get 503
+  std::size_t max_event_streams = 64;  // more /events clients at once get 503
   int write_timeout_s = 5;             // a client that does not read is dropped after this
 };
 
