@@ -206,7 +206,8 @@ CLI::App* addDbCommand(CLI::App& app, DbArguments& args) {
   db->require_subcommand(1);
   // The store itself names a missing file, or a location it cannot open, clearly.
   auto add_db = [&args](CLI::App* sub) {
-    sub->add_option("DB", args.db, "Texture database (SQLite file)")->required();
+    sub->add_option("DB", args.db, "Texture database: SQLite file or postgresql:// URL")
+        ->required();
   };
   CLI::App* list = db->add_subcommand("list", "One line per texture: kind, size, uses, origin");
   add_db(list);

@@ -47,8 +47,9 @@ CLI::App* addRunCommand(CLI::App& app, RunArguments& args) {
                 "Also put the non-planar rest of the TSDF surface (what no patch covers), "
                 "vertex-coloured, into map.obj and map.glb as the object 'residual'");
   run->add_option("--db", args.db,
-                  "Texture database to match against and grow (SQLite file, created if missing); "
-                  "give the same file to several runs of one place to reuse its textures. "
+                  "Texture database to match against and grow: a SQLite file (created if "
+                  "missing) or postgresql://USER@HOST[:PORT]/DBNAME (password from PGPASSWORD or "
+                  "~/.pgpass); give the same one to several runs to reuse its textures. "
                   "Default: OUT/textures.db");
   run->add_option("--record", args.source_args.record_path,
                   "Live devices: also record what the device sends to this .oni file "

@@ -5,6 +5,8 @@
 
 #include <fmt/format.h>
 
+#include "internal/encoded_texture.h"
+#include "internal/postgres_store.h"
 #include "internal/sqlite_schema.h"
 #include "internal/texture_codec.h"
 #include "tessera/core/error.h"
@@ -12,39 +14,7 @@
 namespace tessera::db {
 namespace internal {
 
-// A texture's columns, encoded before the writer lock is taken (PNG encoding is the slow part).
-struct EncodedTexture {
-  const TextureRecord* record = nullptr;
-  std::string content_key;
-  Bytes png, ccv, keypoints, descriptors;
-};
-
 namespace {
-
-EncodedTexture encode(const TextureRecord& record, const std::string& location, std::size_t index) {
-  const auto refuse = [&](const char* why) {
-    return core::Error(
-        fmt::format("{}: cannot commit texture {} of the commit: {}", location, index, why));
-  };
-  if (record.rgb.empty() || record.rgb.type() != CV_8UC3) throw refuse("rgb is not CV_8UC3");
-  if (!record.mask.empty() &&
-      (record.mask.type() != CV_8UC1 || record.mask.size() != record.rgb.size())) {
-    throw refuse("mask is not CV_8UC1 of the rgb's size");
-  }
-  if (!record.descriptors.empty() &&
-      static_cast<std::size_t>(record.descriptors.rows) != record.keypoints.size()) {
-    throw refuse("descriptors need one row per keypoint");
-  }
-  EncodedTexture encoded;
-  encoded.record = &record;
-  // Always computed here, never taken from the record, so that the key matches the pixels.
-  encoded.content_key = contentKey(record.rgb, record.mask);
-  encoded.png = encodePng(record.rgb, record.mask);
-  encoded.ccv = encodeFloats(record.ccv);
-  encoded.keypoints = encodeKeypoints(record.keypoints);
-  encoded.descriptors = encodeDescriptors(record.descriptors);
-  return encoded;
-}
 
 constexpr const char* kInsertTexture =
     "INSERT INTO textures (kind, width, height, texel_m, png, ccv, feature_kind, keypoints, "
@@ -209,7 +179,7 @@ std::vector<std::int64_t> SqliteStore::commit(const Commit& commit) {
   std::vector<EncodedTexture> encoded;
   encoded.reserve(commit.textures.size());
   for (std::size_t i = 0; i < commit.textures.size(); ++i) {
-    encoded.push_back(encode(commit.textures[i], location_, i));
+    encoded.push_back(encodeTexture(commit.textures[i], location_, i));
   }
   const std::lock_guard lock(write_mutex_);
   Connection& db = writer();
@@ -324,11 +294,7 @@ std::unique_ptr<TextureStore> openTextureStore(const std::string& location,
                                                const OpenOptions& options) {
   for (const char* scheme : {"postgresql://", "postgres://"}) {
     if (location.rfind(scheme, 0) == 0) {
-      // Only the scheme is quoted: the rest of the URL may hold a password.
-      throw core::Error(
-          fmt::format("{}...: the PostgreSQL backend is not available yet; use a "
-                      "file path for SQLite",
-                      scheme));
+      return std::make_unique<internal::PostgresStore>(location, options);
     }
   }
   return openSqliteStore(location, options);

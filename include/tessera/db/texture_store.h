@@ -1,6 +1,6 @@
 #pragma once
-// The texture database. SQLite (embedded, one robot) is the default implementation; the
-// interface is narrow so that a server-backed store can follow. Every method is thread-safe:
+// The texture database: SQLite (embedded, one robot) or PostgreSQL (a server a fleet shares),
+// behind one narrow interface. Every method is thread-safe:
 // readers (the matchers) work on committed data while the commit stage writes. Each commit is
 // one transaction; a crash keeps every commit before it and nothing of the one in flight.
 #include <cstdint>
@@ -80,8 +80,9 @@ struct OpenOptions {
 std::unique_ptr<TextureStore> openSqliteStore(const std::filesystem::path& path,
                                               const OpenOptions& options = {});
 
-// A location from the command line: a file path opens SQLite; a postgresql:// URL is refused
-// with a clear message until that backend exists.
+// A location from the command line: a file path opens SQLite; a postgresql:// (or postgres://)
+// URL opens PostgreSQL through libpq, which also takes the password from PGPASSWORD or
+// ~/.pgpass. Throws core::Error naming the location (without a password) when it cannot.
 std::unique_ptr<TextureStore> openTextureStore(const std::string& location,
                                                const OpenOptions& options = {});
 

@@ -24,7 +24,7 @@ struct RunOptions {
   int holdout_every = 0;  // every N-th frame is posed only, for eval's held-out views (0: none)
   bool residual = false;  // map.obj / map.glb also get the non-planar rest of the TSDF surface
   // The texture database the run grows (or reuses from earlier runs); OUT/textures.db when
-  // not given. A postgresql:// URL is refused until that backend exists.
+  // not given. A postgresql:// URL opens a PostgreSQL database shared by several runs.
   std::optional<std::string> db;
   StatsSink::ProgressCallback on_progress;  // may be empty
   // Updated with every frame and commit, and given report.json at the end (may be null).

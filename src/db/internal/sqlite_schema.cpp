@@ -7,70 +7,13 @@
 
 #include <fmt/format.h>
 
+#include "internal/schema_sql.h"
 #include "tessera/core/error.h"
 #include "tessera/db/texture_store.h"
 
 namespace tessera::db::internal {
 
 namespace {
-
-// Schema version 2. Blob formats: internal/texture_codec.h. A texture's run_id is NULL for an
-// imported one; its lattice columns are all NULL when it has no lattice. The instances table is
-// in kInstancesColumnsSql. Version 1 had no instances.layer and UNIQUE (run_id, patch_id):
-// migrateSchema brings such a database to 2.
-constexpr const char* kSchemaSql = R"sql(
-CREATE TABLE meta (
-  key TEXT PRIMARY KEY,
-  value TEXT NOT NULL
-);
-CREATE TABLE runs (
-  id INTEGER PRIMARY KEY,
-  started_utc TEXT NOT NULL,
-  source TEXT NOT NULL,
-  finished INTEGER NOT NULL DEFAULT 0
-);
-CREATE TABLE textures (
-  id INTEGER PRIMARY KEY,
-  kind TEXT NOT NULL CHECK (kind IN ('single', 'pattern')),
-  width INTEGER NOT NULL,
-  height INTEGER NOT NULL,
-  texel_m REAL NOT NULL,
-  png BLOB NOT NULL,
-  ccv BLOB,
-  feature_kind TEXT NOT NULL,
-  keypoints BLOB,
-  descriptors BLOB,
-  lattice_v1x REAL, lattice_v1y REAL, lattice_v2x REAL, lattice_v2y REAL,
-  content_key TEXT NOT NULL UNIQUE,
-  run_id INTEGER REFERENCES runs(id),
-  source_patch INTEGER NOT NULL,
-  name TEXT NOT NULL
-);
-)sql";
-
-// The instances table after its name: one row per layer of a patch (0 the patch's texture,
-// 1.. overlays), every layer of a (run, patch) of the same version. New databases and the
-// migration from version 1 both create it from here, so the two cannot drift apart.
-constexpr const char* kInstancesColumnsSql = R"sql( (
-  run_id INTEGER NOT NULL REFERENCES runs(id),
-  patch_id INTEGER NOT NULL,
-  version INTEGER NOT NULL,
-  layer INTEGER NOT NULL DEFAULT 0,
-  texture_id INTEGER NOT NULL REFERENCES textures(id),
-  a REAL NOT NULL, b REAL NOT NULL, tx REAL NOT NULL, ty REAL NOT NULL,
-  psnr_db REAL,
-  reused INTEGER NOT NULL,
-  UNIQUE (run_id, patch_id, layer)
-);
-)sql";
-
-// textures() counts the uses of every texture.
-constexpr const char* kInstancesIndexSql =
-    "CREATE INDEX instances_by_texture ON instances (texture_id);";
-
-std::string instancesTableSql(const char* name) {
-  return std::string("CREATE TABLE ") + name + kInstancesColumnsSql;
-}
 
 constexpr std::array<char, 16> kSqliteMagic = {'S', 'Q', 'L', 'i', 't', 'e', ' ', 'f',
                                                'o', 'r', 'm', 'a', 't', ' ', '3', '\0'};
@@ -208,8 +151,10 @@ int createSchema(Connection& connection) {
       connection.exec("COMMIT");
       return checkSchema(connection);
     }
-    connection.exec(kSchemaSql);
-    connection.exec((instancesTableSql("instances") + kInstancesIndexSql).c_str());
+    // The tables as both stores define them (internal/schema_sql.h).
+    connection.exec(coreTablesSql(SqlDialect::kSqlite).c_str());
+    connection.exec(
+        (instancesTableSql(SqlDialect::kSqlite, "instances") + instancesIndexSql()).c_str());
     // The meta table names the writer and its schema; application_id and user_version repeat
     // them in the file header, where tools (and inspectFile) read them without SQL.
     connection.exec(fmt::format("INSERT INTO meta (key, value) VALUES ('schema_version', '{0}'), "
@@ -238,13 +183,13 @@ int migrateSchema(Connection& connection) {
       // order SQLite's documentation gives for other ALTER TABLE changes). Dropping the old
       // table drops its index too. Nothing refers to instances, so no foreign key moves.
       connection.exec(
-          (instancesTableSql("instances_v2") +
+          (instancesTableSql(SqlDialect::kSqlite, "instances_v2") +
            "INSERT INTO instances_v2 (run_id, patch_id, version, layer, texture_id, a, b, tx, "
            "ty, psnr_db, reused) SELECT run_id, patch_id, version, 0, texture_id, a, b, tx, ty, "
            "psnr_db, reused FROM instances; "
            "DROP TABLE instances; "
            "ALTER TABLE instances_v2 RENAME TO instances; " +
-           kInstancesIndexSql)
+           instancesIndexSql())
               .c_str());
       Statement set_version(connection, "UPDATE meta SET value = ? WHERE key = 'schema_version'");
       set_version.bind(1, std::to_string(kSchemaVersion)).run();

@@ -1,0 +1,313 @@
+// Opening, the connection pool and the writes of the PostgreSQL store
+// (internal/postgres_store.h).
+#include "internal/postgres_store.h"
+
+#include <regex>
+#include <utility>
+
+#include <fmt/format.h>
+#include <pqxx/pqxx>
+
+#include "internal/encoded_texture.h"
+#include "internal/schema_sql.h"
+#include "tessera/core/error.h"
+
+namespace tessera::db::internal {
+
+namespace {
+
+// The key of the advisory lock that serialises schema creation and migration between
+// processes ("TESS", as the SQLite files' application_id).
+constexpr std::int64_t kSchemaLockKey = 0x54455353;
+
+constexpr const char* kInsertTexture =
+    "INSERT INTO textures (kind, width, height, texel_m, png, ccv, feature_kind, keypoints, "
+    "descriptors, lattice_v1x, lattice_v1y, lattice_v2x, lattice_v2y, content_key, run_id, "
+    "source_patch, name) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14, "
+    "$15, $16, $17) ON CONFLICT (content_key) DO NOTHING RETURNING id";
+
+constexpr const char* kUpsertInstance =
+    "INSERT INTO instances (run_id, patch_id, version, layer, texture_id, a, b, tx, ty, psnr_db, "
+    "reused) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11) ON CONFLICT (run_id, "
+    "patch_id, layer) DO UPDATE SET version = excluded.version, texture_id = "
+    "excluded.texture_id, a = excluded.a, b = excluded.b, tx = excluded.tx, ty = excluded.ty, "
+    "psnr_db = excluded.psnr_db, reused = excluded.reused";
+
+pqxx::binarystring bytes(const Bytes& b) { return pqxx::binarystring(b.data(), b.size()); }
+
+// A nullable double as a statement parameter: libpqxx 6 takes nullptr for NULL.
+template <typename F>
+auto withOptional(const std::optional<double>& value, F&& call) {
+  return value ? call(*value) : call(nullptr);
+}
+
+// The texture's id: inserted now, or already stored by any process (the same pixels).
+std::int64_t storeTexture(pqxx::work& tx, const EncodedTexture& e) {
+  const TextureRecord& r = *e.record;
+  const auto insert = [&](auto v1x, auto v1y, auto v2x, auto v2y, auto run_id) {
+    return tx.exec_params(kInsertTexture, std::string(kindName(r.kind)), r.rgb.cols, r.rgb.rows,
+                          r.texel_m, bytes(e.png), bytes(e.ccv), r.feature_kind,
+                          bytes(e.keypoints), bytes(e.descriptors), v1x, v1y, v2x, v2y,
+                          e.content_key, run_id, r.source_patch, r.name);
+  };
+  const auto insertRun = [&](auto v1x, auto v1y, auto v2x, auto v2y) {
+    return r.run_id != 0 ? insert(v1x, v1y, v2x, v2y, r.run_id)
+                         : insert(v1x, v1y, v2x, v2y, nullptr);
+  };
+  const pqxx::result inserted =
+      r.lattice ? insertRun(r.lattice->v1.x(), r.lattice->v1.y(), r.lattice->v2.x(),
+                            r.lattice->v2.y())
+                : insertRun(nullptr, nullptr, nullptr, nullptr);
+  if (!inserted.empty()) return inserted[0][0].as<std::int64_t>();
+  // Another commit (this process's or another's) stored the same pixels first: ON CONFLICT
+  // waited for it to commit, and this statement sees it.
+  return tx.exec_params1("SELECT id FROM textures WHERE content_key = $1", e.content_key)[0]
+      .as<std::int64_t>();
+}
+
+int readSchemaVersion(pqxx::work& tx, const std::string& location) {
+  const pqxx::result rows = tx.exec(
+      "SELECT (SELECT value FROM meta WHERE key = 'application'), "
+      "(SELECT value FROM meta WHERE key = 'schema_version')");
+  const std::string application = rows[0][0].is_null() ? "" : rows[0][0].c_str();
+  if (application != "tessera") {
+    throw core::Error(fmt::format(
+        "{}: has a meta table, but not a tessera texture database's (application '{}')",
+        location, application));
+  }
+  const std::string text = rows[0][1].is_null() ? "" : rows[0][1].c_str();
+  int version = 0;
+  try {
+    version = std::stoi(text);
+  } catch (const std::exception&) {
+    throw core::Error(fmt::format("{}: unreadable schema_version '{}' in the meta table",
+                                  location, text));
+  }
+  if (version > kSchemaVersion) {
+    throw core::Error(fmt::format(
+        "{}: written by a newer tessera (schema {}; this build reads up to {}); upgrade tessera "
+        "to use it",
+        location, version, kSchemaVersion));
+  }
+  if (version < 1) throw core::Error(fmt::format("{}: bad schema_version {}", location, version));
+  return version;
+}
+
+void createSchema(pqxx::work& tx) {
+  tx.exec(coreTablesSql(SqlDialect::kPostgres));
+  tx.exec(instancesTableSql(SqlDialect::kPostgres, "instances") + instancesIndexSql());
+  tx.exec_params(
+      "INSERT INTO meta (key, value) VALUES ('schema_version', $1), ('application', 'tessera'), "
+      "('created_utc', to_char(now() AT TIME ZONE 'UTC', 'YYYY-MM-DD\"T\"HH24:MI:SS\"Z\"'))",
+      std::to_string(kSchemaVersion));
+}
+
+// Schema 1 -> 2, as the SQLite store migrates: instances get a layer (0 for every row) and
+// UNIQUE (run_id, patch_id, layer).
+void migrateSchema(pqxx::work& tx) {
+  static_assert(kSchemaVersion == 2, "add the migration to the new schema version here");
+  tx.exec(instancesTableSql(SqlDialect::kPostgres, "instances_v2") +
+          "INSERT INTO instances_v2 (run_id, patch_id, version, layer, texture_id, a, b, tx, ty, "
+          "psnr_db, reused) SELECT run_id, patch_id, version, 0, texture_id, a, b, tx, ty, "
+          "psnr_db, reused FROM instances; DROP TABLE instances; "
+          "ALTER TABLE instances_v2 RENAME TO instances; " +
+          instancesIndexSql());
+  tx.exec_params("UPDATE meta SET value = $1 WHERE key = 'schema_version'",
+                 std::to_string(kSchemaVersion));
+}
+
+}  // namespace
+
+std::string redactedUrl(const std::string& url) {
+  static const std::regex user_password(R"(^([a-z]+://[^:/@?]*):[^@/?]*@)");
+  static const std::regex password_parameter(R"(([?&])password=[^&]*&?)");
+  std::string out = std::regex_replace(url, user_password, "$1@");
+  out = std::regex_replace(out, password_parameter, "$1");
+  if (!out.empty() && (out.back() == '&' || out.back() == '?')) out.pop_back();
+  return out;
+}
+
+std::unique_ptr<pqxx::connection> PostgresStore::connect() const {
+  try {
+    return std::make_unique<pqxx::connection>(url_);
+  } catch (const std::exception& e) {
+    // libpq's reasons (refused, unknown host, authentication failed) name no password.
+    std::string why = e.what();
+    while (!why.empty() && (why.back() == '\n' || why.back() == ' ')) why.pop_back();
+    throw core::Error(fmt::format("{}: cannot connect: {}", location_, why));
+  }
+}
+
+PostgresStore::PostgresStore(const std::string& url, const OpenOptions& options)
+    : url_(url), location_(redactedUrl(url)) {
+  std::unique_ptr<pqxx::connection> first = connect();
+  try {
+    pqxx::work tx(*first);
+    // Serialises creation and migration between processes opening the database at once.
+    tx.exec_params("SELECT pg_advisory_xact_lock($1)", kSchemaLockKey);
+    const pqxx::row tables = tx.exec1(
+        "SELECT to_regclass('meta') IS NOT NULL, to_regclass('textures') IS NOT NULL");
+    if (!tables[0].as<bool>()) {
+      if (tables[1].as<bool>()) {
+        throw core::Error(location_ + ": has a textures table but no meta table: not a tessera "
+                                      "texture database");
+      }
+      if (options.read_only || !options.create) {
+        throw core::Error(location_ + ": no tessera texture database there (no meta table)");
+      }
+      createSchema(tx);
+      schema_version_ = kSchemaVersion;
+    } else {
+      schema_version_ = readSchemaVersion(tx, location_);
+      if (schema_version_ < kSchemaVersion && !options.read_only) {
+        migrateSchema(tx);
+        schema_version_ = kSchemaVersion;
+      }
+    }
+    tx.commit();
+  } catch (const core::Error&) {
+    throw;
+  } catch (const pqxx::insufficient_privilege& e) {
+    throw core::Error(fmt::format("{}: not allowed to create or migrate the schema ({}); ask the "
+                                  "database's owner (docs/FLEET.md)",
+                                  location_, e.what()));
+  } catch (const std::exception& e) {
+    throw core::Error(fmt::format("{}: cannot open the texture database: {}", location_, e.what()));
+  }
+  if (!options.read_only) writer_ = connect();
+  pool_.push_back(std::move(first));
+}
+
+PostgresStore::~PostgresStore() = default;
+
+PostgresStore::ReadLease::ReadLease(const PostgresStore& store) : store_(store) {
+  {
+    const std::lock_guard lock(store.pool_mutex_);
+    if (!store.pool_.empty()) {
+      connection_ = std::move(store.pool_.back());
+      store.pool_.pop_back();
+    }
+  }
+  if (!connection_ || !connection_->is_open()) connection_ = store.connect();
+}
+
+PostgresStore::ReadLease::~ReadLease() {
+  const std::lock_guard lock(store_.pool_mutex_);
+  store_.pool_.push_back(std::move(connection_));
+}
+
+pqxx::connection& PostgresStore::writer() {
+  if (!writer_) throw core::Error(location_ + ": opened read-only; cannot write");
+  if (!writer_->is_open()) writer_ = connect();  // the server came back after a restart
+  return *writer_;
+}
+
+std::int64_t PostgresStore::beginRun(const std::string& source) {
+  const std::lock_guard lock(write_mutex_);
+  try {
+    pqxx::work tx(writer());
+    const std::int64_t id =
+        tx.exec_params1(
+              "INSERT INTO runs (started_utc, source, finished) VALUES (to_char(now() AT TIME "
+              "ZONE 'UTC', 'YYYY-MM-DD\"T\"HH24:MI:SS\"Z\"'), $1, 0) RETURNING id",
+              source)[0]
+            .as<std::int64_t>();
+    tx.commit();
+    return id;
+  } catch (const core::Error&) {
+    throw;
+  } catch (const std::exception& e) {
+    throw core::Error(fmt::format("{}: cannot begin a run: {}", location_, e.what()));
+  }
+}
+
+void PostgresStore::finishRun(std::int64_t run_id) {
+  const std::lock_guard lock(write_mutex_);
+  std::size_t changed = 0;
+  try {
+    pqxx::work tx(writer());
+    changed = tx.exec_params("UPDATE runs SET finished = 1 WHERE id = $1", run_id).affected_rows();
+    tx.commit();
+  } catch (const core::Error&) {
+    throw;
+  } catch (const std::exception& e) {
+    throw core::Error(fmt::format("{}: cannot finish run {}: {}", location_, run_id, e.what()));
+  }
+  if (changed == 0) throw core::Error(fmt::format("{}: no run {}", location_, run_id));
+}
+
+std::vector<std::int64_t> PostgresStore::commit(const Commit& commit) {
+  std::vector<EncodedTexture> encoded;
+  encoded.reserve(commit.textures.size());
+  for (std::size_t i = 0; i < commit.textures.size(); ++i) {
+    encoded.push_back(encodeTexture(commit.textures[i], location_, i));
+  }
+  const std::lock_guard lock(write_mutex_);
+  try {
+    return writeCommit(writer(), commit, encoded);
+  } catch (const std::exception& e) {
+    throw core::Error(
+        fmt::format("{} (the commit was rolled back; nothing of it is stored)", e.what()));
+  }
+}
+
+std::vector<std::int64_t> PostgresStore::writeCommit(pqxx::connection& db, const Commit& commit,
+                                                     const std::vector<EncodedTexture>& encoded) {
+  // READ COMMITTED: each statement sees what other processes committed before it, which is
+  // what ON CONFLICT DO NOTHING and the look-up after it need. No two runs write the same
+  // (run, patch), so instance rows never conflict between processes.
+  pqxx::work tx(db);
+  std::vector<std::int64_t> ids;
+  ids.reserve(encoded.size());
+  for (const EncodedTexture& texture : encoded) ids.push_back(storeTexture(tx, texture));
+
+  for (const RetiredPatch& gone : commit.retired) {
+    tx.exec_params("DELETE FROM instances WHERE run_id = $1 AND patch_id = $2", gone.run_id,
+                   gone.patch_id);
+  }
+  for (const TextureInstance& instance : commit.instances) {
+    const std::string which =
+        instance.layer == 0 ? fmt::format("patch {}", instance.patch_id)
+                            : fmt::format("patch {} layer {}", instance.patch_id, instance.layer);
+    if (instance.layer < 0) {
+      throw core::Error(fmt::format("{}: the instance of {} has a negative layer (0 is the "
+                                    "patch's texture, 1.. its overlays)",
+                                    location_, which));
+    }
+    std::int64_t texture_id = instance.texture_id;
+    if (texture_id < 0) {
+      const auto index = static_cast<std::size_t>(-(texture_id + 1));
+      if (index >= ids.size()) {
+        throw core::Error(fmt::format(
+            "{}: the instance of {} refers to new texture {}, but the commit has {}", location_,
+            which, index, ids.size()));
+      }
+      texture_id = ids[index];
+    } else if (tx.exec_params("SELECT 1 FROM textures WHERE id = $1", texture_id).empty()) {
+      throw core::Error(fmt::format(
+          "{}: the instance of {} refers to texture {}, which is not stored", location_, which,
+          texture_id));
+    }
+    if (tx.exec_params("SELECT 1 FROM runs WHERE id = $1", instance.run_id).empty()) {
+      throw core::Error(fmt::format(
+          "{}: the instance of {} belongs to run {}, which is not stored (call beginRun first)",
+          location_, which, instance.run_id));
+    }
+    const pqxx::row stored = tx.exec_params1(
+        "SELECT max(version) FROM instances WHERE run_id = $1 AND patch_id = $2",
+        instance.run_id, instance.patch_id);
+    if (!stored[0].is_null() && stored[0].as<int>() > instance.version) continue;
+    tx.exec_params("DELETE FROM instances WHERE run_id = $1 AND patch_id = $2 AND version < $3",
+                   instance.run_id, instance.patch_id, instance.version);
+    const core::Similarity2& t = instance.transform;
+    withOptional(instance.psnr_db, [&](auto psnr) {
+      return tx.exec_params(kUpsertInstance, instance.run_id, instance.patch_id, instance.version,
+                            instance.layer, texture_id, t.a, t.b, t.tx, t.ty, psnr,
+                            instance.reused ? 1 : 0);
+    });
+  }
+  tx.commit();
+  return ids;
+}
+
+}  // namespace tessera::db::internal
