@@ -5,7 +5,6 @@
 #include <chrono>
 #include <map>
 #include <mutex>
-#include <regex>
 #include <thread>
 
 #include <fmt/format.h>
@@ -41,17 +40,33 @@ bool sameToken(const std::string& a, const std::string& b) {
 }  // namespace
 
 ListenAddress parseListenAddress(const std::string& text) {
-  static const std::regex form(R"(^(?:(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9.\-]+):)?([0-9]{1,5})$)");
-  std::smatch m;
-  if (!std::regex_match(text, m, form)) {
-    throw core::Error(fmt::format("--monitor {}: expected PORT or ADDRESS:PORT", text));
-  }
+  const auto bad = [&](const std::string& why) {
+    return core::Error(fmt::format("--monitor {}: expected PORT or ADDRESS:PORT ({})", text, why));
+  };
   ListenAddress address;
-  if (m[1].matched) {
-    address.host = m[1].str();
-    if (address.host.front() == '[') address.host = address.host.substr(1, address.host.size() - 2);
+  std::string port = text;
+  if (!text.empty() && text.front() == '[') {  // [IPv6]:PORT
+    const std::size_t close = text.find("]:");
+    if (close == std::string::npos) throw bad("an IPv6 address needs [ADDRESS]:PORT");
+    address.host = text.substr(1, close - 1);
+    port = text.substr(close + 2);
+    const bool ipv6 = !address.host.empty() &&
+                      address.host.find_first_not_of("0123456789abcdefABCDEF:.") ==
+                          std::string::npos;
+    if (!ipv6) throw bad("not an IPv6 address");
+  } else if (const std::size_t colon = text.rfind(':'); colon != std::string::npos) {
+    address.host = text.substr(0, colon);
+    port = text.substr(colon + 1);
+    const bool name = !address.host.empty() &&
+                      address.host.find_first_not_of(
+                          "0123456789abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ.-") ==
+                          std::string::npos;
+    if (!name) throw bad("not a host name or address");
   }
-  address.port = std::stoi(m[2].str());
+  if (port.empty() || port.size() > 5 || port.find_first_not_of("0123456789") != std::string::npos) {
+    throw bad("the port is not a number");
+  }
+  address.port = std::stoi(port);
   if (address.port > 65535) {
     throw core::Error(fmt::format("--monitor {}: port {} is out of range", text, address.port));
   }
