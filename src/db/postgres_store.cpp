@@ -42,6 +42,10 @@ auto withOptional(const std::optional<double>& value, F&& call) {
 
 // The texture's id: inserted now, or already stored by any process (the same pixels).
 std::int64_t storeTexture(pqxx::work& tx, const EncodedTexture& e) {
+  // Looked up first: a conflicting INSERT would use up a sequence number for nothing.
+  const pqxx::result stored =
+      tx.exec_params("SELECT id FROM textures WHERE content_key = $1", e.content_key);
+  if (!stored.empty()) return stored[0][0].as<std::int64_t>();
   const TextureRecord& r = *e.record;
   const auto insert = [&](auto v1x, auto v1y, auto v2x, auto v2y, auto run_id) {
     return tx.exec_params(kInsertTexture, std::string(kindName(r.kind)), r.rgb.cols, r.rgb.rows,
@@ -146,6 +150,15 @@ std::string redactedUrl(const std::string& url) {
   return out;
 }
 
+bool isPostgresUrl(const std::string& location) {
+  return location.rfind("postgresql://", 0) == 0 || location.rfind("postgres://", 0) == 0;
+}
+
+std::unique_ptr<TextureStore> openPostgresStore(const std::string& url,
+                                                const OpenOptions& options) {
+  return std::make_unique<PostgresStore>(url, options);
+}
+
 std::unique_ptr<pqxx::connection> PostgresStore::connect() const {
   try {
     return std::make_unique<pqxx::connection>(url_);
@@ -153,7 +166,7 @@ std::unique_ptr<pqxx::connection> PostgresStore::connect() const {
     // libpq's reasons (refused, unknown host, authentication failed) name no password.
     std::string why = e.what();
     while (!why.empty() && (why.back() == '\n' || why.back() == ' ')) why.pop_back();
-    throw core::Error(fmt::format("{}: cannot connect: {}", location_, why));
+    throw ServerUnavailable(fmt::format("{}: cannot connect: {}", location_, why));
   }
 }
 
@@ -193,46 +206,57 @@ PostgresStore::PostgresStore(const std::string& url, const OpenOptions& options)
   } catch (const std::exception& e) {
     throw core::Error(fmt::format("{}: cannot open the texture database: {}", location_, e.what()));
   }
-  if (!options.read_only) writer_ = connect();
+  read_only_ = options.read_only;
   pool_.push_back(std::move(first));
 }
 
 PostgresStore::~PostgresStore() = default;
 
-PostgresStore::ReadLease::ReadLease(const PostgresStore& store) : store_(store) {
-  {
-    const std::lock_guard lock(store.pool_mutex_);
-    if (!store.pool_.empty()) {
-      connection_ = std::move(store.pool_.back());
-      store.pool_.pop_back();
-    }
+bool connectionLost(const std::exception& error) {
+  if (dynamic_cast<const pqxx::broken_connection*>(&error) ||
+      dynamic_cast<const pqxx::in_doubt_error*>(&error)) {
+    return true;
   }
-  if (!connection_ || !connection_->is_open()) connection_ = store.connect();
+  if (const auto* sql = dynamic_cast<const pqxx::sql_error*>(&error)) {
+    const std::string& state = sql->sqlstate();
+    return state.rfind("08", 0) == 0 || state.rfind("57P", 0) == 0;
+  }
+  return false;
+}
+
+PostgresStore::ReadLease::ReadLease(const PostgresStore& store) : store_(store) {
+  const std::lock_guard lock(store.pool_mutex_);
+  if (!store.pool_.empty()) {
+    connection_ = std::move(store.pool_.back());
+    store.pool_.pop_back();
+  }
 }
 
 PostgresStore::ReadLease::~ReadLease() {
+  if (!connection_) return;  // broken: the next lease connects anew
   const std::lock_guard lock(store_.pool_mutex_);
   store_.pool_.push_back(std::move(connection_));
 }
 
-pqxx::connection& PostgresStore::writer() {
-  if (!writer_) throw core::Error(location_ + ": opened read-only; cannot write");
-  if (!writer_->is_open()) writer_ = connect();  // the server came back after a restart
-  return *writer_;
+void PostgresStore::checkWritable() const {
+  if (read_only_) throw core::Error(location_ + ": opened read-only; cannot write");
 }
 
 std::int64_t PostgresStore::beginRun(const std::string& source) {
+  checkWritable();
   const std::lock_guard lock(write_mutex_);
   try {
-    pqxx::work tx(writer());
-    const std::int64_t id =
-        tx.exec_params1(
-              "INSERT INTO runs (started_utc, source, finished) VALUES (to_char(now() AT TIME "
-              "ZONE 'UTC', 'YYYY-MM-DD\"T\"HH24:MI:SS\"Z\"'), $1, 0) RETURNING id",
-              source)[0]
-            .as<std::int64_t>();
-    tx.commit();
-    return id;
+    return onConnection(writer_, [&](pqxx::connection& db) {
+      pqxx::work tx(db);
+      const std::int64_t id =
+          tx.exec_params1(
+                "INSERT INTO runs (started_utc, source, finished) VALUES (to_char(now() AT "
+                "TIME ZONE 'UTC', 'YYYY-MM-DD\"T\"HH24:MI:SS\"Z\"'), $1, 0) RETURNING id",
+                source)[0]
+              .as<std::int64_t>();
+      tx.commit();
+      return id;
+    });
   } catch (const core::Error&) {
     throw;
   } catch (const std::exception& e) {
@@ -241,12 +265,17 @@ std::int64_t PostgresStore::beginRun(const std::string& source) {
 }
 
 void PostgresStore::finishRun(std::int64_t run_id) {
+  checkWritable();
   const std::lock_guard lock(write_mutex_);
   std::size_t changed = 0;
   try {
-    pqxx::work tx(writer());
-    changed = tx.exec_params("UPDATE runs SET finished = 1 WHERE id = $1", run_id).affected_rows();
-    tx.commit();
+    changed = onConnection(writer_, [&](pqxx::connection& db) {
+      pqxx::work tx(db);
+      const std::size_t rows =
+          tx.exec_params("UPDATE runs SET finished = 1 WHERE id = $1", run_id).affected_rows();
+      tx.commit();
+      return rows;
+    });
   } catch (const core::Error&) {
     throw;
   } catch (const std::exception& e) {
@@ -256,6 +285,7 @@ void PostgresStore::finishRun(std::int64_t run_id) {
 }
 
 std::vector<std::int64_t> PostgresStore::commit(const Commit& commit) {
+  checkWritable();
   std::vector<EncodedTexture> encoded;
   encoded.reserve(commit.textures.size());
   for (std::size_t i = 0; i < commit.textures.size(); ++i) {
@@ -263,7 +293,11 @@ std::vector<std::int64_t> PostgresStore::commit(const Commit& commit) {
   }
   const std::lock_guard lock(write_mutex_);
   try {
-    return writeCommit(writer(), commit, encoded);
+    return onConnection(writer_, [&](pqxx::connection& db) {
+      return writeCommit(db, commit, encoded);
+    });
+  } catch (const ServerUnavailable&) {
+    throw;  // the caller may queue it and try again
   } catch (const std::exception& e) {
     throw core::Error(
         fmt::format("{} (the commit was rolled back; nothing of it is stored)", e.what()));

@@ -11,20 +11,6 @@ namespace tessera::db::internal {
 
 namespace {
 
-// Runs `read` in a read-only transaction on a pooled connection; libpqxx's errors become
-// core::Error naming the database.
-template <typename F>
-auto readWith(pqxx::connection& connection, const std::string& location, F&& read) {
-  try {
-    pqxx::read_transaction tx(connection);
-    return read(tx);
-  } catch (const core::Error&) {
-    throw;
-  } catch (const std::exception& e) {
-    throw core::Error(fmt::format("{}: cannot read: {}", location, e.what()));
-  }
-}
-
 TextureKind parseKind(const std::string& text) {
   if (text == "single") return TextureKind::kSingle;
   if (text == "pattern") return TextureKind::kPattern;
@@ -65,8 +51,7 @@ TextureRecord recordOf(const pqxx::row& row, std::int64_t id) {
 }  // namespace
 
 std::optional<std::int64_t> PostgresStore::findByContentKey(const std::string& key) const {
-  const ReadLease db(*this);
-  return readWith(*db, location_, [&](pqxx::read_transaction& tx) -> std::optional<std::int64_t> {
+  return read([&](pqxx::read_transaction& tx) -> std::optional<std::int64_t> {
     const pqxx::result rows = tx.exec_params("SELECT id FROM textures WHERE content_key = $1", key);
     if (rows.empty()) return std::nullopt;
     return rows[0][0].as<std::int64_t>();
@@ -74,8 +59,7 @@ std::optional<std::int64_t> PostgresStore::findByContentKey(const std::string& k
 }
 
 std::optional<TextureRecord> PostgresStore::texture(std::int64_t id) const {
-  const ReadLease db(*this);
-  return readWith(*db, location_, [&](pqxx::read_transaction& tx) -> std::optional<TextureRecord> {
+  return read([&](pqxx::read_transaction& tx) -> std::optional<TextureRecord> {
     const pqxx::result rows = tx.exec_params(
         "SELECT kind, width, height, texel_m, png, ccv, feature_kind, keypoints, descriptors, "
         "lattice_v1x, lattice_v1y, lattice_v2x, lattice_v2y, content_key, run_id, source_patch, "
@@ -91,8 +75,7 @@ std::optional<TextureRecord> PostgresStore::texture(std::int64_t id) const {
 }
 
 std::vector<CcvEntry> PostgresStore::ccvVectors(std::int64_t after_id) const {
-  const ReadLease db(*this);
-  return readWith(*db, location_, [&](pqxx::read_transaction& tx) {
+  return read([&](pqxx::read_transaction& tx) {
     std::vector<CcvEntry> entries;
     for (const pqxx::row& row :
          tx.exec_params("SELECT id, ccv FROM textures WHERE id > $1 ORDER BY id", after_id)) {
@@ -111,8 +94,7 @@ std::vector<CcvEntry> PostgresStore::ccvVectors(std::int64_t after_id) const {
 }
 
 std::vector<TextureSummary> PostgresStore::textures() const {
-  const ReadLease db(*this);
-  return readWith(*db, location_, [&](pqxx::read_transaction& tx) {
+  return read([&](pqxx::read_transaction& tx) {
     std::vector<TextureSummary> summaries;
     for (const pqxx::row& row : tx.exec(
              "SELECT t.id, t.kind, t.width, t.height, t.run_id, t.source_patch, t.name, "
@@ -134,8 +116,7 @@ std::vector<TextureSummary> PostgresStore::textures() const {
 }
 
 std::vector<TextureInstance> PostgresStore::instances(std::optional<std::int64_t> run_id) const {
-  const ReadLease db(*this);
-  return readWith(*db, location_, [&](pqxx::read_transaction& tx) {
+  return read([&](pqxx::read_transaction& tx) {
     const std::string columns =
         schema_version_ >= 2 ? "run_id, patch_id, version, layer, texture_id, a, b, tx, ty, "
                                "psnr_db, reused"
@@ -165,8 +146,7 @@ std::vector<TextureInstance> PostgresStore::instances(std::optional<std::int64_t
 }
 
 std::vector<RunRecord> PostgresStore::runs() const {
-  const ReadLease db(*this);
-  return readWith(*db, location_, [&](pqxx::read_transaction& tx) {
+  return read([&](pqxx::read_transaction& tx) {
     std::vector<RunRecord> runs;
     for (const pqxx::row& row :
          tx.exec("SELECT id, started_utc, source, finished FROM runs ORDER BY id")) {
@@ -178,8 +158,7 @@ std::vector<RunRecord> PostgresStore::runs() const {
 }
 
 StoreStats PostgresStore::stats() const {
-  const ReadLease db(*this);
-  return readWith(*db, location_, [&](pqxx::read_transaction& tx) {
+  return read([&](pqxx::read_transaction& tx) {
     // One statement: every count from the same snapshot. The database's size on disk stands
     // for the SQLite file's.
     const pqxx::row row = tx.exec1(

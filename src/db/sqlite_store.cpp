@@ -6,7 +6,7 @@
 #include <fmt/format.h>
 
 #include "internal/encoded_texture.h"
-#include "internal/postgres_store.h"
+#include "internal/postgres_open.h"
 #include "internal/sqlite_schema.h"
 #include "internal/texture_codec.h"
 #include "tessera/core/error.h"
@@ -292,11 +292,7 @@ std::unique_ptr<TextureStore> openSqliteStore(const std::filesystem::path& path,
 
 std::unique_ptr<TextureStore> openTextureStore(const std::string& location,
                                                const OpenOptions& options) {
-  for (const char* scheme : {"postgresql://", "postgres://"}) {
-    if (location.rfind(scheme, 0) == 0) {
-      return std::make_unique<internal::PostgresStore>(location, options);
-    }
-  }
+  if (internal::isPostgresUrl(location)) return internal::openPostgresStore(location, options);
   return openSqliteStore(location, options);
 }
 

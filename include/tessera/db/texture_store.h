@@ -10,9 +10,18 @@
 #include <string>
 #include <vector>
 
+#include "tessera/core/error.h"
 #include "tessera/db/texture_record.h"
 
 namespace tessera::db {
+
+// Thrown by a server's store when the server cannot be reached now (refused, restarted, the
+// network gone, a commit whose outcome is unknown). Trying the same commit again later is
+// safe: a commit stored twice stores nothing new (content keys, versioned instances).
+class ServerUnavailable : public core::Error {
+ public:
+  using core::Error::Error;
+};
 
 // The schema this build writes. A database with a higher version is refused; one of version 1
 // (no instance layers) is migrated when opened for writing, and read as it is when read-only.

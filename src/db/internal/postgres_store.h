@@ -15,19 +15,16 @@
 #include <string>
 #include <vector>
 
-#include "tessera/db/texture_store.h"
+#include <fmt/format.h>
+#include <pqxx/pqxx>
 
-namespace pqxx {
-class connection;
-}
+#include "internal/postgres_open.h"
+#include "tessera/core/error.h"
+#include "tessera/db/texture_store.h"
 
 namespace tessera::db::internal {
 
 struct EncodedTexture;
-
-// `url` without a password: postgresql://user:secret@host/db -> postgresql://user@host/db, and
-// a password=... parameter dropped.
-std::string redactedUrl(const std::string& url);
 
 class PostgresStore final : public TextureStore {
  public:
@@ -55,15 +52,25 @@ class PostgresStore final : public TextureStore {
     ~ReadLease();
     ReadLease(const ReadLease&) = delete;
     ReadLease& operator=(const ReadLease&) = delete;
-    pqxx::connection& operator*() const { return *connection_; }
+    std::unique_ptr<pqxx::connection>& connection() { return connection_; }
 
    private:
     const PostgresStore& store_;
     std::unique_ptr<pqxx::connection> connection_;
   };
 
-  std::unique_ptr<pqxx::connection> connect() const;
-  pqxx::connection& writer();  // the caller holds write_mutex_
+  std::unique_ptr<pqxx::connection> connect() const;  // throws ServerUnavailable
+  // Runs `work(connection)`, connecting first when `connection` is closed. When the
+  // connection breaks (the server restarted or went away) it connects once more and runs
+  // `work` again, then throws ServerUnavailable. Running twice is safe: reads are reads, and
+  // a commit stored twice stores nothing new.
+  template <typename F>
+  auto onConnection(std::unique_ptr<pqxx::connection>& connection, F&& work) const;
+  // Runs `work(transaction)` in a read-only transaction on a pooled connection: one committed
+  // snapshot. libpqxx's errors become core::Error naming the database.
+  template <typename F>
+  auto read(F&& work) const;
+  void checkWritable() const;
   std::vector<std::int64_t> writeCommit(pqxx::connection& db, const Commit& commit,
                                         const std::vector<EncodedTexture>& encoded);
 
@@ -71,9 +78,46 @@ class PostgresStore final : public TextureStore {
   std::string location_;  // redacted
   int schema_version_ = kSchemaVersion;
   std::mutex write_mutex_;
-  std::unique_ptr<pqxx::connection> writer_;  // null when read-only
+  bool read_only_ = false;
+  std::unique_ptr<pqxx::connection> writer_;  // null until the first write, or after a break
   mutable std::mutex pool_mutex_;
   mutable std::vector<std::unique_ptr<pqxx::connection>> pool_;
 };
+
+// True for the errors that mean the connection is gone rather than the statement wrong:
+// libpqxx's broken_connection and in_doubt_error, and the server's SQLSTATE classes 08
+// (connection exception) and 57P (operator intervention: shutdown, restart).
+bool connectionLost(const std::exception& error);
+
+template <typename F>
+auto PostgresStore::onConnection(std::unique_ptr<pqxx::connection>& connection, F&& work) const {
+  for (int attempt = 0;; ++attempt) {
+    try {
+      if (!connection || !connection->is_open()) connection = connect();
+      return work(*connection);
+    } catch (const std::exception& e) {
+      if (!connectionLost(e)) throw;
+      connection.reset();
+      if (attempt == 1) {
+        throw ServerUnavailable(fmt::format("{}: the server went away: {}", location_, e.what()));
+      }
+    }
+  }
+}
+
+template <typename F>
+auto PostgresStore::read(F&& work) const {
+  ReadLease lease(*this);
+  try {
+    return onConnection(lease.connection(), [&](pqxx::connection& connection) {
+      pqxx::read_transaction tx(connection);
+      return work(tx);
+    });
+  } catch (const core::Error&) {
+    throw;
+  } catch (const std::exception& e) {
+    throw core::Error(fmt::format("{}: cannot read: {}", location_, e.what()));
+  }
+}
 
 }  // namespace tessera::db::internal
