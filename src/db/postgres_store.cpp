@@ -119,6 +119,19 @@ void migrateSchema(pqxx::work& tx) {
                  std::to_string(kSchemaVersion));
 }
 
+// libpq waits for ever by default; a robot's commits must not: 5 s to connect, 10 s for data
+// the server does not acknowledge (a network that vanished), unless the URL says otherwise.
+std::string withTimeouts(const std::string& url) {
+  std::string out = url;
+  for (const char* setting : {"connect_timeout=5", "tcp_user_timeout=10000"}) {
+    const std::string key = std::string(setting).substr(0, std::string(setting).find('=') + 1);
+    if (out.find(key) != std::string::npos) continue;
+    out += out.find('?') == std::string::npos ? '?' : '&';
+    out += setting;
+  }
+  return out;
+}
+
 }  // namespace
 
 std::string redactedUrl(const std::string& url) {
@@ -156,7 +169,9 @@ bool isPostgresUrl(const std::string& location) {
 
 std::unique_ptr<TextureStore> openPostgresStore(const std::string& url,
                                                 const OpenOptions& options) {
-  return std::make_unique<PostgresStore>(url, options);
+  auto server = std::make_unique<PostgresStore>(url, options);
+  if (options.read_only) return server;
+  return queueWhileAway(std::move(server), options);
 }
 
 std::unique_ptr<pqxx::connection> PostgresStore::connect() const {
@@ -171,7 +186,7 @@ std::unique_ptr<pqxx::connection> PostgresStore::connect() const {
 }
 
 PostgresStore::PostgresStore(const std::string& url, const OpenOptions& options)
-    : url_(url), location_(redactedUrl(url)) {
+    : url_(withTimeouts(url)), location_(redactedUrl(url)) {
   std::unique_ptr<pqxx::connection> first = connect();
   try {
     pqxx::work tx(*first);

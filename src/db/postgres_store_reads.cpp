@@ -11,12 +11,6 @@ namespace tessera::db::internal {
 
 namespace {
 
-TextureKind parseKind(const std::string& text) {
-  if (text == "single") return TextureKind::kSingle;
-  if (text == "pattern") return TextureKind::kPattern;
-  throw core::Error("unknown kind '" + text + "'");
-}
-
 // A bytea column's bytes (empty for NULL).
 pqxx::binarystring blob(const pqxx::field& field) {
   return field.is_null() ? pqxx::binarystring(std::string()) : pqxx::binarystring(field);

@@ -8,6 +8,7 @@
 #include "internal/encoded_texture.h"
 #include "internal/postgres_open.h"
 #include "internal/sqlite_schema.h"
+#include "internal/sqlite_texture_rows.h"
 #include "internal/texture_codec.h"
 #include "tessera/core/error.h"
 
@@ -15,11 +16,6 @@ namespace tessera::db {
 namespace internal {
 
 namespace {
-
-constexpr const char* kInsertTexture =
-    "INSERT INTO textures (kind, width, height, texel_m, png, ccv, feature_kind, keypoints, "
-    "descriptors, lattice_v1x, lattice_v1y, lattice_v2x, lattice_v2y, content_key, run_id, "
-    "source_patch, name) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)";
 
 // The version of a (run, patch) that is stored: every layer has it (NULL when none is stored).
 constexpr const char* kStoredVersion =
@@ -37,28 +33,6 @@ constexpr const char* kUpsertInstance =
     "UPDATE SET version = excluded.version, texture_id = excluded.texture_id, a = excluded.a, "
     "b = excluded.b, tx = excluded.tx, ty = excluded.ty, psnr_db = excluded.psnr_db, "
     "reused = excluded.reused";
-
-std::int64_t insertTexture(Statement& insert, Connection& db, const EncodedTexture& encoded) {
-  const TextureRecord& r = *encoded.record;
-  insert.reset();
-  insert.bind(1, std::string(kindName(r.kind)))
-      .bind(2, std::int64_t{r.rgb.cols})
-      .bind(3, std::int64_t{r.rgb.rows})
-      .bind(4, r.texel_m)
-      .bindBlob(5, encoded.png.data(), encoded.png.size())
-      .bindBlob(6, encoded.ccv.data(), encoded.ccv.size())
-      .bind(7, r.feature_kind)
-      .bindBlob(8, encoded.keypoints.data(), encoded.keypoints.size())
-      .bindBlob(9, encoded.descriptors.data(), encoded.descriptors.size());
-  if (r.lattice) {
-    insert.bind(10, r.lattice->v1.x()).bind(11, r.lattice->v1.y());
-    insert.bind(12, r.lattice->v2.x()).bind(13, r.lattice->v2.y());
-  }  // else the lattice columns stay NULL (reset() clears bindings)
-  insert.bind(14, encoded.content_key);
-  if (r.run_id != 0) insert.bind(15, r.run_id);
-  insert.bind(16, std::int64_t{r.source_patch}).bind(17, r.name).run();
-  return db.lastInsertId();
-}
 
 bool rowExists(Statement& query, std::int64_t id) {
   query.reset();

@@ -5,48 +5,13 @@
 #include <fmt/format.h>
 
 #include "internal/sqlite_store.h"
+#include "internal/sqlite_texture_rows.h"
 #include "internal/texture_codec.h"
 #include "tessera/core/error.h"
 
 namespace tessera::db::internal {
 
 namespace {
-
-TextureKind parseKind(const std::string& text) {
-  if (text == "single") return TextureKind::kSingle;
-  if (text == "pattern") return TextureKind::kPattern;
-  throw core::Error("unknown kind '" + text + "'");
-}
-
-constexpr const char* kSelectTexture =
-    "SELECT kind, width, height, texel_m, png, ccv, feature_kind, keypoints, descriptors, "
-    "lattice_v1x, lattice_v1y, lattice_v2x, lattice_v2y, content_key, run_id, source_patch, "
-    "name FROM textures WHERE id = ?";
-
-// The row of kSelectTexture as a record; throws core::Error with the reason when a column does
-// not decode.
-TextureRecord recordOf(const Statement& row, std::int64_t id) {
-  TextureRecord r;
-  r.id = id;
-  r.kind = parseKind(row.text(0));
-  r.texel_m = row.real(3);
-  decodePng(row.blobData(4), row.blobSize(4), r.rgb, r.mask);
-  if (r.rgb.cols != row.int64(1) || r.rgb.rows != row.int64(2)) {
-    throw core::Error("PNG size differs from the stored width and height");
-  }
-  r.ccv = decodeFloats(row.blobData(5), row.blobSize(5));
-  r.feature_kind = row.text(6);
-  r.keypoints = decodeKeypoints(row.blobData(7), row.blobSize(7));
-  r.descriptors = decodeDescriptors(row.blobData(8), row.blobSize(8));
-  if (!row.isNull(9)) {
-    r.lattice = Lattice{{row.real(9), row.real(10)}, {row.real(11), row.real(12)}};
-  }
-  r.content_key = row.text(13);
-  r.run_id = row.int64(14);  // NULL (imported) reads as 0
-  r.source_patch = static_cast<int>(row.int64(15));
-  r.name = row.text(16);
-  return r;
-}
 
 std::size_t fileBytes(const std::filesystem::path& path) {
   std::error_code ec;

@@ -21,12 +21,15 @@ namespace {
 
 using test::errorOf;
 using test::makeTexture;
+using test::TempFolder;
 
 // One server for the whole suite: starting one takes a second or two.
 class PostgresStoreTest : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
     cluster_ = tessera::test::PostgresCluster::start(why_not_).release();
+    // As a robot would: the password from the environment, never in the URL.
+    if (cluster_ != nullptr) setenv("PGPASSWORD", cluster_->password(), 1);
   }
   static void TearDownTestSuite() {
     delete cluster_;
@@ -230,11 +233,12 @@ TEST_F(PostgresStoreTest, CredentialsNeverAppearInLocationsOrMessages) {
   EXPECT_EQ(internal::redactedUrl("postgresql://db.local/fleet?user=robot&password=" + secret +
                                   "&sslmode=require"),
             "postgresql://db.local/fleet?user=robot&sslmode=require");
-  // The trust server accepts any password: the store works, and shows none.
+  // The right password in the URL: the store works, and shows none.
   const std::string url = freshDatabase();
-  const std::string with_password = "postgresql://tessera:" + secret + url.substr(20);
+  const std::string password = tessera::test::PostgresCluster::password();
+  const std::string with_password = "postgresql://tessera:" + password + url.substr(20);
   const auto store = openTextureStore(with_password);
-  EXPECT_EQ(store->location().find(secret), std::string::npos) << store->location();
+  EXPECT_EQ(store->location().find(password), std::string::npos) << store->location();
   // Nothing listens on port 1: the connection fails, and the message names the server only.
   const std::string refused =
       errorOf([&] { openTextureStore("postgresql://robot:" + secret + "@127.0.0.1:1/fleet"); });
@@ -244,12 +248,14 @@ TEST_F(PostgresStoreTest, CredentialsNeverAppearInLocationsOrMessages) {
       << refused;
 }
 
-// The server goes away and comes back: the commits while it is away fail with a clear message
-// (the pipeline keeps those patches' own bitmaps), and the next one after it returns is stored
-// on a new connection. Queuing and replaying the failed ones is not built yet.
-TEST_F(PostgresStoreTest, AfterAServerRestartTheNextCommitIsStored) {
+// The server goes away and comes back: the commits made while it is away wait in the journal
+// and reach the server, in order, when it is back; the run's end waits for them.
+TEST_F(PostgresStoreTest, AServerRestartMidRunLosesNoCommit) {
   const std::string url = freshDatabase();
-  const auto store = openTextureStore(url);
+  TempFolder dir;
+  OpenOptions options;
+  options.journal = dir / "journal.sqlite";
+  const auto store = openTextureStore(url, options);
   const std::int64_t run = store->beginRun("restart");
   const auto commitOne = [&](std::uint32_t seed, int patch) {
     Commit commit;
@@ -260,15 +266,35 @@ TEST_F(PostgresStoreTest, AfterAServerRestartTheNextCommitIsStored) {
     i.version = 1;
     i.texture_id = -1;
     commit.instances = {i};
-    store->commit(commit);
+    return store->commit(commit).at(0);
   };
   commitOne(1, 1);
   ASSERT_TRUE(cluster_->stopServer());
-  EXPECT_THROW(commitOne(2, 2), ServerUnavailable);
+  const std::int64_t queued = commitOne(2, 2);  // waits in the journal
+  const std::int64_t also_queued = commitOne(3, 3);
+  EXPECT_EQ(store->serverLink()->pending_commits, 2u);
   ASSERT_TRUE(cluster_->startServer());
-  commitOne(3, 3);
-  EXPECT_EQ(store->stats().textures, 2u);
-  EXPECT_EQ(store->instances().size(), 2u);
+  store->finishRun(run);  // waits for the journal to be sent first
+  const ServerLink link = *store->serverLink();
+  EXPECT_EQ(link.pending_commits, 0u);
+  EXPECT_EQ(link.replayed_commits, 2u);
+  EXPECT_EQ(link.outages, 1u);
+  EXPECT_EQ(store->stats().textures, 3u);
+  std::set<std::int64_t> shown;
+  for (const TextureInstance& i : store->instances()) shown.insert(i.texture_id);
+  EXPECT_EQ(shown.count(store->resolvedId(queued)), 1u);
+  EXPECT_EQ(shown.count(store->resolvedId(also_queued)), 1u);
+  EXPECT_TRUE(store->runs().at(0).finished);
+}
+
+TEST_F(PostgresStoreTest, AWrongPasswordIsOneClearErrorWithoutThePassword) {
+  ASSERT_TRUE(cluster_->psql("CREATE ROLE robot LOGIN PASSWORD 'right-one'"));
+  const std::string url = freshDatabase();
+  std::string with_password = url;
+  with_password.replace(with_password.find("tessera@"), 8, "robot:wrong-one@");
+  const std::string message = errorOf([&] { openTextureStore(with_password); });
+  EXPECT_NE(message.find("cannot connect"), std::string::npos) << message;
+  EXPECT_EQ(message.find("wrong-one"), std::string::npos) << message;
 }
 
 }  // namespace

@@ -341,7 +341,7 @@ TEST(SqliteStore, EmptyFileIsANewDatabaseOnlyWhenCreating) {
   TempFolder dir;
   const auto path = dir / "empty.db";
   std::ofstream(path).close();
-  for (const OpenOptions options : {OpenOptions{.create = false, .read_only = false},
+  for (const OpenOptions& options : {OpenOptions{.create = false, .read_only = false},
                                     OpenOptions{.create = true, .read_only = true}}) {
     const std::string message = errorOf([&] { openSqliteStore(path, options); });
     EXPECT_NE(message.find("empty file"), std::string::npos) << message;

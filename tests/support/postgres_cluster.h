@@ -18,8 +18,10 @@ namespace tessera::test {
 
 class PostgresCluster {
  public:
-  // A running server with an empty database `tessera` owned by the superuser `tessera` (trust
-  // authentication on 127.0.0.1), or nothing, with `why_not` set.
+  // A running server with an empty database `tessera` owned by the superuser `tessera`, or
+  // nothing, with `why_not` set. Over TCP (as the stores connect) the server asks for the
+  // password (scram-sha-256): password(), which the tests hand over through PGPASSWORD. The
+  // helpers below use the local socket, which trusts.
   static std::unique_ptr<PostgresCluster> start(std::string& why_not) {
     namespace fs = std::filesystem;
     fs::path bin;
@@ -55,8 +57,11 @@ class PostgresCluster {
       }
     }
     cluster->port_ = freePort();
-    if (!cluster->run("initdb -D " + cluster->data() + " -U tessera --auth=trust -E UTF8 "
-                      "--no-sync > " + cluster->dir_.string() + "/initdb.log 2>&1")) {
+    { std::ofstream(cluster->dir_ / "password") << kPassword << '\n'; }
+    if (!cluster->run("initdb -D " + cluster->data() + " -U tessera --auth-local=trust "
+                      "--auth-host=scram-sha-256 --pwfile=" + cluster->dir_.string() +
+                      "/password -E UTF8 --no-sync > " + cluster->dir_.string() +
+                      "/initdb.log 2>&1")) {
       why_not = "initdb failed (see " + cluster->dir_.string() + "/initdb.log)";
       cluster->dir_.clear();  // kept for the log
       return nullptr;
@@ -65,8 +70,7 @@ class PostgresCluster {
       why_not = "the server did not start (see " + cluster->dir_.string() + "/server.log)";
       return nullptr;
     }
-    if (!cluster->run("createdb -h 127.0.0.1 -p " + std::to_string(cluster->port_) +
-                      " -U tessera tessera")) {
+    if (!cluster->createDatabase("tessera")) {
       why_not = "createdb failed";
       return nullptr;
     }
@@ -82,6 +86,8 @@ class PostgresCluster {
   }
 
   int port() const { return port_; }
+  static constexpr const char* kPassword = "pg-test-Zq81x";
+  static const char* password() { return kPassword; }
   std::string url(const std::string& database = "tessera") const {
     return "postgresql://tessera@127.0.0.1:" + std::to_string(port_) + "/" + database;
   }
@@ -89,11 +95,12 @@ class PostgresCluster {
   bool psql(const std::string& sql, const std::string& database = "tessera") const {
     const std::string file = dir_.string() + "/statement.sql";
     { std::ofstream(file) << sql << '\n'; }
-    return run("psql -q -v ON_ERROR_STOP=1 -h 127.0.0.1 -p " + std::to_string(port_) +
+    return run("psql -q -v ON_ERROR_STOP=1 -h " + dir_.string() + " -p " + std::to_string(port_) +
                " -U tessera -d " + database + " -f " + file + " > /dev/null 2>&1");
   }
   bool createDatabase(const std::string& name) const {
-    return run("createdb -h 127.0.0.1 -p " + std::to_string(port_) + " -U tessera " + name);
+    return run("createdb -h " + dir_.string() + " -p " + std::to_string(port_) + " -U tessera " +
+               name);
   }
   bool stopServer() {
     running_ = !run("pg_ctl -D " + data() + " -m fast -w stop > /dev/null 2>&1");

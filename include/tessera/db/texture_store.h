@@ -51,6 +51,19 @@ struct CcvEntry {
   std::vector<float> ccv;
 };
 
+// How a server's store fared with its server during a run: when the server was away, commits
+// waited in a local journal and were sent when it came back.
+struct ServerLink {
+  std::size_t outages = 0;            // times the server went away
+  double disconnected_s = 0.0;        // time commits were queued instead of sent
+  std::size_t queued_commits = 0;     // commits (and run ends) that waited in the journal
+  std::size_t replayed_commits = 0;   // of those, sent when the server came back
+  std::size_t replayed_textures = 0;  // new textures those carried
+  std::size_t refused_commits = 0;    // replayed but refused by the server (logged)
+  std::size_t pending_commits = 0;    // still in the journal: the server did not come back
+  std::string journal;                // the journal's path
+};
+
 class TextureStore {
  public:
   virtual ~TextureStore() = default;
@@ -77,11 +90,23 @@ class TextureStore {
   virtual std::vector<TextureInstance> instances(std::optional<std::int64_t> run_id = {}) const = 0;
   virtual std::vector<RunRecord> runs() const = 0;
   virtual StoreStats stats() const = 0;
+
+  // A server's store hands out provisional ids for textures it had to queue; this is the id
+  // the server gave such a texture once it took it (any other id is returned as it is).
+  virtual std::int64_t resolvedId(std::int64_t id) const { return id; }
+  // Nothing for a file's store.
+  virtual std::optional<ServerLink> serverLink() const { return std::nullopt; }
 };
 
 struct OpenOptions {
   bool create = true;      // create the file (and schema) when it does not exist
   bool read_only = false;  // never write (db list, db show)
+  // A server's store, writable: where commits wait while the server is away (empty: a file
+  // in the temporary directory), how large that file may grow, and how long finishRun waits
+  // for the server to take what waits there.
+  std::filesystem::path journal{};
+  std::size_t journal_max_mb = 2048;
+  double finish_wait_s = 30.0;
 };
 
 // Opens the SQLite database at `path`. Throws core::Error naming the file when it is not a
@@ -94,5 +119,11 @@ std::unique_ptr<TextureStore> openSqliteStore(const std::filesystem::path& path,
 // ~/.pgpass. Throws core::Error naming the location (without a password) when it cannot.
 std::unique_ptr<TextureStore> openTextureStore(const std::string& location,
                                                const OpenOptions& options = {});
+
+// Wraps a server's store so that its commits wait in a local journal (options.journal, or a
+// new file in the temporary directory) while the server is away (ServerUnavailable), and are
+// sent in order when it is back. openTextureStore does this for every writable server URL.
+std::unique_ptr<TextureStore> queueWhileAway(std::unique_ptr<TextureStore> server,
+                                             const OpenOptions& options = {});
 
 }  // namespace tessera::db

@@ -11,6 +11,12 @@
 
 namespace tessera::db::internal {
 
+TextureKind parseKind(const std::string& text) {
+  if (text == "single") return TextureKind::kSingle;
+  if (text == "pattern") return TextureKind::kPattern;
+  throw core::Error("unknown kind '" + text + "'");
+}
+
 // The blobs are written with memcpy of native values; a big-endian port would need byte swaps
 // in put()/get() to keep reading databases written on x86 and ARM.
 static_assert(std::endian::native == std::endian::little, "blob formats are little-endian");

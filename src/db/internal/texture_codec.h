@@ -9,14 +9,20 @@
 // The decoders throw core::Error with a short reason when the bytes do not fit the format.
 #include <cstddef>
 #include <cstdint>
+#include <string>
 #include <vector>
 
 #include <opencv2/core/mat.hpp>
 #include <opencv2/core/types.hpp>
 
+#include "tessera/db/texture_record.h"
+
 namespace tessera::db::internal {
 
 using Bytes = std::vector<std::uint8_t>;
+
+// The kind column: "single" or "pattern" (kindName's inverse).
+TextureKind parseKind(const std::string& text);
 
 // `rgb` CV_8UC3 in R G B order; `mask` CV_8UC1 of the same size, or empty (all valid).
 Bytes encodePng(const cv::Mat& rgb, const cv::Mat& mask);
