@@ -163,6 +163,21 @@ std::string redactedUrl(const std::string& url) {
   return out;
 }
 
+// libpq's messages span lines ("...failed: Connection refused\n\tIs the server running...");
+// a log line should not.
+std::string oneLine(const std::string& text) {
+  std::string out;
+  for (const char c : text) {
+    if (c == '\n') {
+      out += "; ";
+    } else if (c != '\t') {
+      out += c;
+    }
+  }
+  while (!out.empty() && (out.back() == ' ' || out.back() == ';')) out.pop_back();
+  return out;
+}
+
 bool isPostgresUrl(const std::string& location) {
   return location.rfind("postgresql://", 0) == 0 || location.rfind("postgres://", 0) == 0;
 }
@@ -179,9 +194,7 @@ std::unique_ptr<pqxx::connection> PostgresStore::connect() const {
     return std::make_unique<pqxx::connection>(url_);
   } catch (const std::exception& e) {
     // libpq's reasons (refused, unknown host, authentication failed) name no password.
-    std::string why = e.what();
-    while (!why.empty() && (why.back() == '\n' || why.back() == ' ')) why.pop_back();
-    throw ServerUnavailable(fmt::format("{}: cannot connect: {}", location_, why));
+    throw ServerUnavailable(fmt::format("{}: cannot connect: {}", location_, oneLine(e.what())));
   }
 }
 

@@ -62,7 +62,8 @@ void removeDatabaseFiles(const std::filesystem::path& path) {
 
 // Gives each exported patch the database texture its newest instance names, writes each such
 // texture once (OUT/textures/texture_<id>.png), and fills the summary's economy figures.
-void bindMapTextures(const CommitStage& commits, const StoreCatalog& catalog,
+void bindMapTextures(const db::TextureStore& store, const CommitStage& commits,
+                     const StoreCatalog& catalog,
                      const std::filesystem::path& out_dir, planes::TextureBindings& bindings,
                      RunSummary& summary) {
   std::set<std::int64_t> used;
@@ -70,8 +71,8 @@ void bindMapTextures(const CommitStage& commits, const StoreCatalog& catalog,
   const auto show = [&](const db::TextureInstance& instance, const match::StoredTexture& stored) {
     const cv::Mat& rgb = stored.storedRgb();
     planes::MapTexture shown;
-    shown.texture_id = instance.texture_id;
-    shown.image = fmt::format("textures/texture_{}.png", instance.texture_id);
+    shown.texture_id = store.resolvedId(instance.texture_id);  // the server's id, once sent
+    shown.image = fmt::format("textures/texture_{}.png", shown.texture_id);
     shown.width = rgb.cols;
     shown.height = rgb.rows;
     shown.transform = instance.transform;
@@ -81,7 +82,7 @@ void bindMapTextures(const CommitStage& commits, const StoreCatalog& catalog,
     shown.psnr_db = instance.psnr_db;
     if (instance.reused)
       (stored.pattern ? summary.patterns_matched : summary.textures_matched) += 1;
-    if (used.insert(instance.texture_id).second) {
+    if (used.insert(shown.texture_id).second) {
       texture::writeRgbaPng(out_dir / shown.image, rgb, stored.storedMask());
       summary.pixels_after += rgb.total();
     }
@@ -158,7 +159,9 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
   const std::string db_location =
       options.db ? *options.db : (options.out_dir / "textures.db").string();
   if (!options.db) removeDatabaseFiles(db_location);
-  const std::unique_ptr<db::TextureStore> store = db::openTextureStore(db_location);
+  db::OpenOptions db_options;
+  db_options.journal = options.out_dir / "db_journal.sqlite";  // a server's database only
+  const std::unique_ptr<db::TextureStore> store = db::openTextureStore(db_location, db_options);
   const std::int64_t run_id = store->beginRun(source.name());
   const match::MatchCascade cascade(config.match);
   StoreCatalog catalog(*store, config.match);
@@ -170,7 +173,7 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
            describe_stage, commit_stage, sink,
            {threads, source.isLive() ? config.pipeline.live_frames_in_flight
                                      : config.pipeline.max_frames_in_flight});
-  store->finishRun(run_id);
+  store->finishRun(run_id);  // a server's store first sends what waited in its journal
   const double wall_s =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 
@@ -249,7 +252,8 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
   planes::TextureBindings textures =
       texture::currentBindings(texture_stage.written(), patches, options.out_dir);
   summary.db = store->location();
-  bindMapTextures(commit_stage, catalog, options.out_dir, textures, summary);
+  summary.server_link = store->serverLink();
+  bindMapTextures(*store, commit_stage, catalog, options.out_dir, textures, summary);
   for (const auto& [id, binding] : textures) {
     summary.bitmaps += 1;
     summary.bitmap_texels_observed += binding.observed;
@@ -356,6 +360,16 @@ nlohmann::json reportJson(const RunSummary& summary) {
       summary.source_end_problem.empty() ? json(nullptr) : json(summary.source_end_problem);
   // The texture database: economy and matching (docs/METRICS.md).
   report["db"] = summary.db;
+  if (const auto& link = summary.server_link) {
+    report["db_server"] = {{"outages", link->outages},
+                           {"disconnected_s", link->disconnected_s},
+                           {"queued_commits", link->queued_commits},
+                           {"replayed_commits", link->replayed_commits},
+                           {"replayed_textures", link->replayed_textures},
+                           {"refused_commits", link->refused_commits},
+                           {"pending_commits", link->pending_commits},
+                           {"journal", link->journal}};
+  }
   report["textures_stored"] = summary.textures_stored;
   report["patterns_stored"] = summary.patterns_stored;
   report["textures_matched"] = summary.textures_matched;

@@ -23,35 +23,7 @@ using test::errorOf;
 using test::makeTexture;
 using test::TempFolder;
 
-// One server for the whole suite: starting one takes a second or two.
-class PostgresStoreTest : public ::testing::Test {
- protected:
-  static void SetUpTestSuite() {
-    cluster_ = tessera::test::PostgresCluster::start(why_not_).release();
-    // As a robot would: the password from the environment, never in the URL.
-    if (cluster_ != nullptr) setenv("PGPASSWORD", cluster_->password(), 1);
-  }
-  static void TearDownTestSuite() {
-    delete cluster_;
-    cluster_ = nullptr;
-  }
-  void SetUp() override {
-    if (cluster_ == nullptr) GTEST_SKIP() << why_not_;
-  }
-  // A fresh database per test.
-  std::string freshDatabase() {
-    static int counter = 0;
-    const std::string name = "t" + std::to_string(++counter);
-    EXPECT_TRUE(cluster_->createDatabase(name));
-    return cluster_->url(name);
-  }
-
-  static tessera::test::PostgresCluster* cluster_;
-  static std::string why_not_;
-};
-
-tessera::test::PostgresCluster* PostgresStoreTest::cluster_ = nullptr;
-std::string PostgresStoreTest::why_not_;
+using PostgresStoreTest = tessera::test::PostgresTest;
 
 // A run's worth of commits: new textures, a reuse of the same pixels, a newer version with an
 // overlay layer, a late older version, a retired patch.

@@ -9,6 +9,7 @@
 #include <nlohmann/json.hpp>
 
 #include "tessera/core/frame_source.h"
+#include "tessera/db/texture_store.h"
 #include "tessera/eval/trajectory.h"
 #include "tessera/loop/loop_graph.h"
 #include "tessera/pipeline/run_config.h"
@@ -24,7 +25,8 @@ struct RunOptions {
   int holdout_every = 0;  // every N-th frame is posed only, for eval's held-out views (0: none)
   bool residual = false;  // map.obj / map.glb also get the non-planar rest of the TSDF surface
   // The texture database the run grows (or reuses from earlier runs); OUT/textures.db when
-  // not given. A postgresql:// URL opens a PostgreSQL database shared by several runs.
+  // not given. A postgresql:// URL opens a PostgreSQL database shared by several runs; while
+  // its server is away, commits wait in OUT/db_journal.sqlite.
   std::optional<std::string> db;
   StatsSink::ProgressCallback on_progress;  // may be empty
   // Updated with every frame and commit, and given report.json at the end (may be null).
@@ -88,6 +90,7 @@ struct RunSummary {
   double bitmap_ms_per_m2 = 0.0;  // build time over observed area, every version built
   // The texture database (docs/METRICS.md, "Texture economy" and "Matching").
   std::string db;
+  std::optional<db::ServerLink> server_link;  // a server's database only
   std::size_t textures_stored = 0;  // new textures this run stored (versions included)
   std::size_t patterns_stored = 0;
   std::size_t overlays = 0;          // overlay layers the map draws on patterned patches

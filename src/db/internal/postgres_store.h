@@ -88,6 +88,8 @@ class PostgresStore final : public TextureStore {
 // libpqxx's broken_connection and in_doubt_error, and the server's SQLSTATE classes 08
 // (connection exception) and 57P (operator intervention: shutdown, restart).
 bool connectionLost(const std::exception& error);
+// libpq's multi-line messages on one line.
+std::string oneLine(const std::string& text);
 
 template <typename F>
 auto PostgresStore::onConnection(std::unique_ptr<pqxx::connection>& connection, F&& work) const {
@@ -99,7 +101,8 @@ auto PostgresStore::onConnection(std::unique_ptr<pqxx::connection>& connection, 
       if (!connectionLost(e)) throw;
       connection.reset();
       if (attempt == 1) {
-        throw ServerUnavailable(fmt::format("{}: the server went away: {}", location_, e.what()));
+        throw ServerUnavailable(
+            fmt::format("{}: the server went away: {}", location_, oneLine(e.what())));
       }
     }
   }
