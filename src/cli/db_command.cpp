@@ -13,6 +13,7 @@
 
 #include "stop_request.h"
 #include "tessera/core/error.h"
+#include "tessera/db/store_copy.h"
 #include "tessera/db/texture_store.h"
 #include "tessera/match/match_cascade.h"
 #include "tessera/monitor/monitor_server.h"
@@ -199,6 +200,40 @@ int serve(const DbArguments& args) {
   return 0;
 }
 
+// Everything DB holds into DESTINATION (created if missing), with a progress line.
+int copy(const db::TextureStore& from, const std::string& destination) {
+  const std::unique_ptr<db::TextureStore> to = db::openTextureStore(destination);
+  spdlog::info("copying {} into {}", from.location(), to->location());
+  auto last = std::chrono::steady_clock::now();
+  const db::CopyReport report =
+      db::copyStore(from, *to, [&last](std::size_t done, std::size_t total) {
+        const auto now = std::chrono::steady_clock::now();
+        if (done < total && now - last < std::chrono::seconds(2)) return;
+        last = now;
+        spdlog::info("textures {} / {}", done, total);
+      });
+  fmt::print("{} runs copied ({} copied before), {} textures copied ({} already there), {} "
+             "instances\n",
+             report.runs_copied, report.runs_already_there, report.textures_copied,
+             report.textures_already_there, report.instances_copied);
+  return 0;
+}
+
+// Sends a journal a run left (its server was away at the end) to that server.
+int flush(const DbArguments& args) {
+  const db::ServerLink link = db::flushJournal(args.db, args.destination, args.wait_s);
+  fmt::print("{} commits with {} new textures sent, {} refused, {} left\n",
+             link.replayed_commits, link.replayed_textures, link.refused_commits,
+             link.pending_commits);
+  if (link.pending_commits > 0) {
+    spdlog::error("{}: {} commits not sent within {:.0f} s (the server is away again?); they "
+                  "stay in the journal",
+                  args.db, link.pending_commits, args.wait_s);
+    return 1;
+  }
+  return 0;
+}
+
 }  // namespace
 
 CLI::App* addDbCommand(CLI::App& app, DbArguments& args) {
@@ -246,12 +281,31 @@ CLI::App* addDbCommand(CLI::App& app, DbArguments& args) {
                     "Require this bearer token on every request (also read from "
                     "TESSERA_MONITOR_TOKEN)")
       ->envname("TESSERA_MONITOR_TOKEN");
+  CLI::App* copy = db->add_subcommand(
+      "copy", "Copy every run, texture and instance of DB into DESTINATION (SQLite or "
+              "PostgreSQL, created if missing); copying again adds nothing twice");
+  add_db(copy);
+  copy->add_option("DESTINATION", args.destination,
+                   "Database to copy into: SQLite file or postgresql:// URL")
+      ->required();
+  CLI::App* flush = db->add_subcommand(
+      "flush", "Send the commits a run left in OUT/db_journal.sqlite (its PostgreSQL server "
+               "was away when it ended) to that server");
+  flush->add_option("JOURNAL", args.db, "The journal (OUT/db_journal.sqlite)")
+      ->required()
+      ->check(CLI::ExistingFile);
+  flush->add_option("--db", args.destination,
+                    "The server's URL, when the journal's (which has no password) is not enough");
+  flush->add_option("--wait", args.wait_s, "Seconds to wait for the server to take everything")
+      ->capture_default_str()
+      ->check(CLI::NonNegativeNumber);
   return db;
 }
 
 int dbCommand(const CLI::App& db, const DbArguments& args) {
   try {
     const auto parsed = [&db](const char* name) { return db.get_subcommand(name)->parsed(); };
+    if (parsed("flush")) return flush(args);
     const bool writes = parsed("import");
     const std::unique_ptr<db::TextureStore> store =
         db::openTextureStore(args.db, {writes, !writes});
@@ -260,6 +314,7 @@ int dbCommand(const CLI::App& db, const DbArguments& args) {
     if (parsed("export")) return exportAll(*store, args.out_dir);
     if (parsed("import")) return import(*store, args);
     if (parsed("serve")) return serve(args);
+    if (parsed("copy")) return copy(*store, args.destination);
     return stats(*store, args.json);
   } catch (const core::Error& e) {
     spdlog::error("{}", e.what());

@@ -18,6 +18,8 @@ struct DbArguments {
   bool json = false;                // list, show, stats: one JSON object instead of text
   std::string listen = "8080";      // serve: [ADDR:]PORT
   std::string token;                // serve: bearer token required when not empty
+  std::string destination;          // copy: the database to copy into
+  double wait_s = 60.0;             // flush: how long to wait for the server
 };
 
 // Adds `db` with its subcommands; returns the `db` command.

@@ -8,6 +8,7 @@
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
+#include "internal/postgres_open.h"
 #include "tessera/core/error.h"
 
 namespace tessera::db::internal {
@@ -256,6 +257,30 @@ std::unique_ptr<TextureStore> queueWhileAway(std::unique_ptr<TextureStore> serve
                           std::chrono::duration_cast<std::chrono::milliseconds>(now).count());
   }
   return std::make_unique<internal::QueuedServerStore>(std::move(server), journal, options);
+}
+
+ServerLink flushJournal(const std::filesystem::path& journal, const std::string& server,
+                        double wait_s) {
+  const std::string written_for = internal::CommitJournal::serverOf(journal);
+  if (!internal::isPostgresUrl(written_for)) {
+    throw core::Error(fmt::format("{}: written for '{}', which is not a server's URL",
+                                  journal.string(), written_for));
+  }
+  OpenOptions options;
+  options.create = false;
+  options.journal = journal;
+  // (The journal refuses a server other than its own, so a URL given here can only add a
+  // password.)
+  const std::unique_ptr<TextureStore> store =
+      openTextureStore(server.empty() ? written_for : server, options);
+  const auto deadline =
+      std::chrono::steady_clock::now() + std::chrono::duration<double>(wait_s);
+  ServerLink link = *store->serverLink();
+  while (link.pending_commits > 0 && std::chrono::steady_clock::now() < deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    link = *store->serverLink();
+  }
+  return link;
 }
 
 }  // namespace tessera::db

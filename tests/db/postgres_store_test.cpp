@@ -9,6 +9,7 @@
 
 #include "db/store_test_support.h"
 #include "support/postgres_cluster.h"
+#include "tessera/db/store_copy.h"
 #include "tessera/db/texture_store.h"
 
 namespace tessera::db {
@@ -22,63 +23,10 @@ namespace {
 using test::errorOf;
 using test::makeTexture;
 using test::TempFolder;
+using test::commitRun;
+using test::keysOf;
 
 using PostgresStoreTest = tessera::test::PostgresTest;
-
-// A run's worth of commits: new textures, a reuse of the same pixels, a newer version with an
-// overlay layer, a late older version, a retired patch.
-void commitRun(TextureStore& store) {
-  const std::int64_t run = store.beginRun("recordings/office.oni");
-  Commit first;
-  first.textures = {makeTexture(1), makeTexture(2, 40, 20)};
-  first.textures[1].kind = TextureKind::kPattern;
-  first.textures[1].lattice = Lattice{{8.0, 0.0}, {0.5, 7.25}};
-  for (auto& t : first.textures) t.run_id = run;
-  for (int patch : {1, 2}) {
-    TextureInstance i;
-    i.run_id = run;
-    i.patch_id = patch;
-    i.version = 1;
-    i.texture_id = -patch;
-    i.transform = core::Similarity2::fromAngleScale(0.1 * patch, 1.0, 2.0, -3.0);
-    first.instances.push_back(i);
-  }
-  store.commit(first);
-  Commit second;  // the same pixels again (stored once), patch 1 at version 2 with an overlay
-  second.textures = {makeTexture(1), makeTexture(3, 16, 16)};
-  TextureInstance base;
-  base.run_id = run;
-  base.patch_id = 1;
-  base.version = 2;
-  base.texture_id = -1;
-  base.reused = true;
-  base.psnr_db = 31.5;
-  TextureInstance overlay = base;
-  overlay.layer = 1;
-  overlay.texture_id = -2;
-  overlay.psnr_db.reset();
-  second.instances = {base, overlay};
-  store.commit(second);
-  Commit late;  // version 1 of patch 1 arriving after version 2: ignored
-  TextureInstance old = base;
-  old.version = 1;
-  old.texture_id = 1;
-  late.instances = {old};
-  store.commit(late);
-  Commit retire;
-  retire.retired = {{run, 2}};
-  store.commit(retire);
-  store.finishRun(run);
-}
-
-using InstanceKey = std::tuple<std::int64_t, int, int, int, std::int64_t, bool>;
-std::set<InstanceKey> keysOf(const std::vector<TextureInstance>& instances) {
-  std::set<InstanceKey> keys;
-  for (const TextureInstance& i : instances) {
-    keys.insert({i.run_id, i.patch_id, i.version, i.layer, i.texture_id, i.reused});
-  }
-  return keys;
-}
 
 TEST_F(PostgresStoreTest, TheSameCommitsReadTheSameFromBothStores) {
   test::TempFolder folder;
@@ -222,6 +170,30 @@ TEST_F(PostgresStoreTest, CredentialsNeverAppearInLocationsOrMessages) {
 
 // The server goes away and comes back: the commits made while it is away wait in the journal
 // and reach the server, in order, when it is back; the run's end waits for them.
+// A robot's SQLite database into the fleet's server, and from there into a fresh file: the
+// same textures and instances all the way.
+TEST_F(PostgresStoreTest, ADatabaseCopiedToTheServerAndBackHoldsTheSame) {
+  TempFolder dir;
+  const auto robot = openSqliteStore(dir / "robot.db");
+  commitRun(*robot);
+  const auto fleet = openTextureStore(freshDatabase());
+  const CopyReport up = copyStore(*robot, *fleet);
+  EXPECT_EQ(up.textures_copied, robot->stats().textures);
+  const auto back = openSqliteStore(dir / "back.db");
+  copyStore(*fleet, *back);
+  for (const TextureStore* store : {fleet.get(), back.get()}) {
+    EXPECT_EQ(store->stats().textures, robot->stats().textures);
+    EXPECT_EQ(store->stats().instances, robot->stats().instances);
+    std::set<std::string> keys, robot_keys;
+    for (const TextureSummary& t : store->textures()) keys.insert(store->texture(t.id)->content_key);
+    for (const TextureSummary& t : robot->textures()) {
+      robot_keys.insert(robot->texture(t.id)->content_key);
+    }
+    EXPECT_EQ(keys, robot_keys);
+  }
+  EXPECT_EQ(copyStore(*robot, *fleet).textures_copied, 0u);
+}
+
 TEST_F(PostgresStoreTest, AServerRestartMidRunLosesNoCommit) {
   const std::string url = freshDatabase();
   TempFolder dir;

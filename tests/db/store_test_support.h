@@ -8,7 +8,9 @@
 #include <fstream>
 #include <iterator>
 #include <random>
+#include <set>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -131,6 +133,61 @@ inline std::string rawQuery(const std::filesystem::path& path, const std::string
   }
   sqlite3_close(db);
   return result;
+}
+
+// A run's worth of commits: new textures, a reuse of the same pixels, a newer version with an
+// overlay layer, a late older version, a retired patch.
+inline void commitRun(TextureStore& store) {
+  const std::int64_t run = store.beginRun("recordings/office.oni");
+  Commit first;
+  first.textures = {makeTexture(1), makeTexture(2, 40, 20)};
+  first.textures[1].kind = TextureKind::kPattern;
+  first.textures[1].lattice = Lattice{{8.0, 0.0}, {0.5, 7.25}};
+  for (auto& t : first.textures) t.run_id = run;
+  for (int patch : {1, 2}) {
+    TextureInstance i;
+    i.run_id = run;
+    i.patch_id = patch;
+    i.version = 1;
+    i.texture_id = -patch;
+    i.transform = core::Similarity2::fromAngleScale(0.1 * patch, 1.0, 2.0, -3.0);
+    first.instances.push_back(i);
+  }
+  store.commit(first);
+  Commit second;  // the same pixels again (stored once), patch 1 at version 2 with an overlay
+  second.textures = {makeTexture(1), makeTexture(3, 16, 16)};
+  TextureInstance base;
+  base.run_id = run;
+  base.patch_id = 1;
+  base.version = 2;
+  base.texture_id = -1;
+  base.reused = true;
+  base.psnr_db = 31.5;
+  TextureInstance overlay = base;
+  overlay.layer = 1;
+  overlay.texture_id = -2;
+  overlay.psnr_db.reset();
+  second.instances = {base, overlay};
+  store.commit(second);
+  Commit late;  // version 1 of patch 1 arriving after version 2: ignored
+  TextureInstance old = base;
+  old.version = 1;
+  old.texture_id = 1;
+  late.instances = {old};
+  store.commit(late);
+  Commit retire;
+  retire.retired = {{run, 2}};
+  store.commit(retire);
+  store.finishRun(run);
+}
+
+using InstanceKey = std::tuple<std::int64_t, int, int, int, std::int64_t, bool>;
+inline std::set<InstanceKey> keysOf(const std::vector<TextureInstance>& instances) {
+  std::set<InstanceKey> keys;
+  for (const TextureInstance& i : instances) {
+    keys.insert({i.run_id, i.patch_id, i.version, i.layer, i.texture_id, i.reused});
+  }
+  return keys;
 }
 
 }  // namespace tessera::db::test

@@ -126,4 +126,12 @@ std::unique_ptr<TextureStore> openTextureStore(const std::string& location,
 std::unique_ptr<TextureStore> queueWhileAway(std::unique_ptr<TextureStore> server,
                                              const OpenOptions& options = {});
 
+// Sends what a run left in `journal` (OUT/db_journal.sqlite, when its server was away at the
+// end) to the server it was written for, or to `server` (the same database, its URL with a
+// password), waiting up to `wait_s` for the last of it. Returns what was sent and what is left;
+// an empty journal is removed. Throws core::Error naming the journal or the server when it
+// cannot start (not a journal, the server unreachable).
+ServerLink flushJournal(const std::filesystem::path& journal, const std::string& server = {},
+                        double wait_s = 60.0);
+
 }  // namespace tessera::db
