@@ -200,6 +200,8 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
   summary.latency_ms_p95 = percentile(sink.latenciesMs(), 0.95);
   summary.commit_latency_ms_p50 = percentile(commit_stage.commitLatenciesMs(), 0.50);
   summary.commit_latency_ms_p95 = percentile(commit_stage.commitLatenciesMs(), 0.95);
+  summary.db_commit_ms_p50 = percentile(commit_stage.storeCommitMs(), 0.50);
+  summary.db_commit_ms_p95 = percentile(commit_stage.storeCommitMs(), 0.95);
   if (commit_stage.matchTimer().count() > 0)
     summary.match_ms_p50 = commit_stage.matchTimer().medianMs();
   summary.wall_s = wall_s;
@@ -404,6 +406,8 @@ nlohmann::json reportJson(const RunSummary& summary) {
                                 : json(nullptr);
   report["commit_latency_ms_p50"] = optional(summary.commit_latency_ms_p50);
   report["commit_latency_ms_p95"] = optional(summary.commit_latency_ms_p95);
+  report["db_commit_ms_p50"] = optional(summary.db_commit_ms_p50);
+  report["db_commit_ms_p95"] = optional(summary.db_commit_ms_p95);
   report["match_ms_p50"] = optional(summary.match_ms_p50);
   // Against ground truth: `tessera eval` fills these.
   for (const char* key : {"plane_recall", "plane_precision", "false_match_rate",

@@ -346,8 +346,10 @@ CommitRecord CommitStage::process(DescribedPatch described) {
     commit.instances.push_back(instance);
   }
   std::vector<std::int64_t> ids;
+  const auto commit_start = std::chrono::steady_clock::now();
   try {
     ids = store_.commit(commit);
+    store_commit_ms_.push_back(msSince(commit_start));
   } catch (const core::Error& e) {
     // The map keeps the patch's own bitmap; the database keeps every earlier commit.
     spdlog::error("patch {} version {}: not committed: {}", bitmap.id, bitmap.version, e.what());
@@ -383,8 +385,10 @@ void CommitStage::retire(int patch_id) {
   ScopedStageTime time(timer_);
   db::Commit commit;
   commit.retired.push_back({run_id_, patch_id});
+  const auto commit_start = std::chrono::steady_clock::now();
   try {
     store_.commit(commit);
+    store_commit_ms_.push_back(msSince(commit_start));
   } catch (const core::Error& e) {
     // The database keeps an instance of a patch the map no longer has; the map is right.
     spdlog::error("patch {} (merged into another): its instances stay: {}", patch_id, e.what());

@@ -8,7 +8,7 @@
 #include <opencv2/core.hpp>
 
 #include "db/store_test_support.h"
-#include "support/postgres_cluster.h"
+#include "support/postgres_test.h"
 #include "tessera/db/store_copy.h"
 #include "tessera/db/texture_store.h"
 

@@ -15,7 +15,7 @@
 #include <spdlog/sinks/ostream_sink.h>
 #include <spdlog/spdlog.h>
 
-#include "support/postgres_cluster.h"
+#include "support/postgres_test.h"
 #include "support/test_data.h"
 #include "tessera/db/texture_store.h"
 #include "tessera/drivers/oni/oni_source.h"

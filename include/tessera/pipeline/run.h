@@ -101,6 +101,8 @@ struct RunSummary {
   std::vector<double> shown_psnrs_db;  // fidelity of each reuse or pattern in the map
   std::size_t ccv_considered = 0, ccv_removed = 0;
   std::optional<double> commit_latency_ms_p50, commit_latency_ms_p95;
+  // TextureStore::commit calls alone (the database's part of the latency above).
+  std::optional<double> db_commit_ms_p50, db_commit_ms_p95;
   std::optional<double> match_ms_p50;
   // ATE of the fused poses against the recording's ground truth, when it has one.
   std::optional<eval::AteResult> ate;

@@ -237,6 +237,8 @@ class CommitStage {
   std::size_t ccvConsidered() const { return ccv_considered_; }
   std::size_t ccvRemoved() const { return ccv_removed_; }
   const std::vector<double>& commitLatenciesMs() const { return commit_latencies_ms_; }
+  // The database's own share: each TextureStore::commit call (retirements included).
+  const std::vector<double>& storeCommitMs() const { return store_commit_ms_; }
   const StageTimer& matchTimer() const { return match_timer_; }
   const StageTimer& timer() const { return timer_; }
 
@@ -267,7 +269,7 @@ class CommitStage {
   std::map<int, std::size_t> patch_pixels_;  // texels of each committed patch's bitmap
   std::size_t textures_stored_ = 0, patterns_stored_ = 0, commit_failures_ = 0, retirements_ = 0;
   std::size_t ccv_considered_ = 0, ccv_removed_ = 0;
-  std::vector<double> commit_latencies_ms_;
+  std::vector<double> commit_latencies_ms_, store_commit_ms_;
   StageTimer match_timer_, timer_;
 };
 
