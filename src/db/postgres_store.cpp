@@ -19,18 +19,36 @@ namespace {
 // processes ("TESS", as the SQLite files' application_id).
 constexpr std::int64_t kSchemaLockKey = 0x54455353;
 
-constexpr const char* kInsertTexture =
+// One round trip per texture (on a busy robot each one waits for the server process to be
+// scheduled): its id if the same pixels are stored, else inserted. Looked up first, because
+// a conflicting INSERT would use up a sequence number for nothing; ON CONFLICT covers another
+// process inserting the same pixels meanwhile (then no row comes back, and a look-up follows).
+constexpr const char* kStoreTexture =
+    "WITH found AS (SELECT id FROM textures WHERE content_key = $14), inserted AS ("
     "INSERT INTO textures (kind, width, height, texel_m, png, ccv, feature_kind, keypoints, "
     "descriptors, lattice_v1x, lattice_v1y, lattice_v2x, lattice_v2y, content_key, run_id, "
-    "source_patch, name) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14, "
-    "$15, $16, $17) ON CONFLICT (content_key) DO NOTHING RETURNING id";
+    "source_patch, name) SELECT $1::text, $2::integer, $3::integer, $4::double precision, "
+    "$5::bytea, $6::bytea, $7::text, $8::bytea, $9::bytea, $10::double precision, "
+    "$11::double precision, $12::double precision, $13::double precision, $14::text, "
+    "$15::bigint, $16::integer, $17::text WHERE NOT EXISTS (SELECT 1 FROM found) "
+    "ON CONFLICT (content_key) DO NOTHING RETURNING id) "
+    "SELECT id FROM found UNION ALL SELECT id FROM inserted";
 
-constexpr const char* kUpsertInstance =
+// One round trip per instance, with the SQLite store's rules: nothing when a newer version of
+// the patch is stored; else the older versions' other layers go, and this layer is inserted
+// or replaces the same layer of an older or the same version.
+constexpr const char* kPutInstance =
+    "WITH newer AS (SELECT 1 FROM instances WHERE run_id = $1 AND patch_id = $2 AND version > $3), "
+    "gone AS (DELETE FROM instances WHERE run_id = $1 AND patch_id = $2 AND version < $3 AND "
+    "layer <> $4) "
     "INSERT INTO instances (run_id, patch_id, version, layer, texture_id, a, b, tx, ty, psnr_db, "
-    "reused) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11) ON CONFLICT (run_id, "
-    "patch_id, layer) DO UPDATE SET version = excluded.version, texture_id = "
-    "excluded.texture_id, a = excluded.a, b = excluded.b, tx = excluded.tx, ty = excluded.ty, "
-    "psnr_db = excluded.psnr_db, reused = excluded.reused";
+    "reused) SELECT $1::bigint, $2::integer, $3::integer, $4::integer, $5::bigint, "
+    "$6::double precision, $7::double precision, $8::double precision, $9::double precision, "
+    "$10::double precision, $11::integer WHERE NOT EXISTS (SELECT 1 FROM newer) "
+    "ON CONFLICT (run_id, patch_id, layer) DO UPDATE SET version = excluded.version, "
+    "texture_id = excluded.texture_id, a = excluded.a, b = excluded.b, tx = excluded.tx, "
+    "ty = excluded.ty, psnr_db = excluded.psnr_db, reused = excluded.reused "
+    "WHERE instances.version <= excluded.version";
 
 pqxx::binarystring bytes(const Bytes& b) { return pqxx::binarystring(b.data(), b.size()); }
 
@@ -42,13 +60,9 @@ auto withOptional(const std::optional<double>& value, F&& call) {
 
 // The texture's id: inserted now, or already stored by any process (the same pixels).
 std::int64_t storeTexture(pqxx::work& tx, const EncodedTexture& e) {
-  // Looked up first: a conflicting INSERT would use up a sequence number for nothing.
-  const pqxx::result stored =
-      tx.exec_params("SELECT id FROM textures WHERE content_key = $1", e.content_key);
-  if (!stored.empty()) return stored[0][0].as<std::int64_t>();
   const TextureRecord& r = *e.record;
   const auto insert = [&](auto v1x, auto v1y, auto v2x, auto v2y, auto run_id) {
-    return tx.exec_params(kInsertTexture, std::string(kindName(r.kind)), r.rgb.cols, r.rgb.rows,
+    return tx.exec_params(kStoreTexture, std::string(kindName(r.kind)), r.rgb.cols, r.rgb.rows,
                           r.texel_m, bytes(e.png), bytes(e.ccv), r.feature_kind,
                           bytes(e.keypoints), bytes(e.descriptors), v1x, v1y, v2x, v2y,
                           e.content_key, run_id, r.source_patch, r.name);
@@ -62,8 +76,8 @@ std::int64_t storeTexture(pqxx::work& tx, const EncodedTexture& e) {
                             r.lattice->v2.y())
                 : insertRun(nullptr, nullptr, nullptr, nullptr);
   if (!inserted.empty()) return inserted[0][0].as<std::int64_t>();
-  // Another commit (this process's or another's) stored the same pixels first: ON CONFLICT
-  // waited for it to commit, and this statement sees it.
+  // Another process stored the same pixels meanwhile: ON CONFLICT waited for it to commit,
+  // and this statement sees it.
   return tx.exec_params1("SELECT id FROM textures WHERE content_key = $1", e.content_key)[0]
       .as<std::int64_t>();
 }
@@ -98,6 +112,8 @@ int readSchemaVersion(pqxx::work& tx, const std::string& location) {
 
 void createSchema(pqxx::work& tx) {
   tx.exec(coreTablesSql(SqlDialect::kPostgres));
+  // PNG is compressed already: TOAST's own compression would only cost time.
+  tx.exec("ALTER TABLE textures ALTER COLUMN png SET STORAGE EXTERNAL");
   tx.exec(instancesTableSql(SqlDialect::kPostgres, "instances") + instancesIndexSql());
   tx.exec_params(
       "INSERT INTO meta (key, value) VALUES ('schema_version', $1), ('application', 'tessera'), "
@@ -364,28 +380,25 @@ std::vector<std::int64_t> PostgresStore::writeCommit(pqxx::connection& db, const
             which, index, ids.size()));
       }
       texture_id = ids[index];
-    } else if (tx.exec_params("SELECT 1 FROM textures WHERE id = $1", texture_id).empty()) {
-      throw core::Error(fmt::format(
-          "{}: the instance of {} refers to texture {}, which is not stored", location_, which,
-          texture_id));
     }
-    if (tx.exec_params("SELECT 1 FROM runs WHERE id = $1", instance.run_id).empty()) {
+    const core::Similarity2& t = instance.transform;
+    try {
+      withOptional(instance.psnr_db, [&](auto psnr) {
+        return tx.exec_params(kPutInstance, instance.run_id, instance.patch_id, instance.version,
+                              instance.layer, texture_id, t.a, t.b, t.tx, t.ty, psnr,
+                              instance.reused ? 1 : 0);
+      });
+    } catch (const pqxx::foreign_key_violation& e) {
+      // The constraint's name says which reference is missing.
+      if (std::string(e.what()).find("texture_id") != std::string::npos) {
+        throw core::Error(fmt::format(
+            "{}: the instance of {} refers to texture {}, which is not stored", location_, which,
+            texture_id));
+      }
       throw core::Error(fmt::format(
           "{}: the instance of {} belongs to run {}, which is not stored (call beginRun first)",
           location_, which, instance.run_id));
     }
-    const pqxx::row stored = tx.exec_params1(
-        "SELECT max(version) FROM instances WHERE run_id = $1 AND patch_id = $2",
-        instance.run_id, instance.patch_id);
-    if (!stored[0].is_null() && stored[0].as<int>() > instance.version) continue;
-    tx.exec_params("DELETE FROM instances WHERE run_id = $1 AND patch_id = $2 AND version < $3",
-                   instance.run_id, instance.patch_id, instance.version);
-    const core::Similarity2& t = instance.transform;
-    withOptional(instance.psnr_db, [&](auto psnr) {
-      return tx.exec_params(kUpsertInstance, instance.run_id, instance.patch_id, instance.version,
-                            instance.layer, texture_id, t.a, t.b, t.tx, t.ty, psnr,
-                            instance.reused ? 1 : 0);
-    });
   }
   tx.commit();
   return ids;

@@ -255,6 +255,8 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
       texture::currentBindings(texture_stage.written(), patches, options.out_dir);
   summary.db = store->location();
   summary.server_link = store->serverLink();
+  summary.db_run_id = run_id;
+  for (const auto& [patch, layers] : commit_stage.instances()) summary.db_instances += layers.size();
   bindMapTextures(*store, commit_stage, catalog, options.out_dir, textures, summary);
   for (const auto& [id, binding] : textures) {
     summary.bitmaps += 1;
@@ -362,6 +364,8 @@ nlohmann::json reportJson(const RunSummary& summary) {
       summary.source_end_problem.empty() ? json(nullptr) : json(summary.source_end_problem);
   // The texture database: economy and matching (docs/METRICS.md).
   report["db"] = summary.db;
+  report["db_run_id"] = summary.db_run_id;
+  report["db_instances"] = summary.db_instances;
   if (const auto& link = summary.server_link) {
     report["db_server"] = {{"outages", link->outages},
                            {"disconnected_s", link->disconnected_s},

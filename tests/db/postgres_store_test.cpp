@@ -194,6 +194,32 @@ TEST_F(PostgresStoreTest, ADatabaseCopiedToTheServerAndBackHoldsTheSame) {
   EXPECT_EQ(copyStore(*robot, *fleet).textures_copied, 0u);
 }
 
+// A commit naming a texture or a run the database does not have is refused whole, with the
+// SQLite store's messages.
+TEST_F(PostgresStoreTest, ACommitNamingAMissingTextureOrRunIsRefusedWhole) {
+  const auto store = openTextureStore(freshDatabase());
+  const std::int64_t run = store->beginRun("office");
+  Commit commit;
+  commit.textures = {makeTexture(5)};
+  TextureInstance instance;
+  instance.run_id = run;
+  instance.patch_id = 3;
+  instance.version = 1;
+  instance.texture_id = 77;
+  commit.instances = {instance};
+  const std::string texture = errorOf([&] { store->commit(commit); });
+  EXPECT_NE(texture.find("the instance of patch 3 refers to texture 77, which is not stored"),
+            std::string::npos)
+      << texture;
+  commit.instances[0].texture_id = -1;
+  commit.instances[0].run_id = run + 5;
+  const std::string missing_run = errorOf([&] { store->commit(commit); });
+  EXPECT_NE(missing_run.find("belongs to run " + std::to_string(run + 5) + ", which is not stored"),
+            std::string::npos)
+      << missing_run;
+  EXPECT_EQ(store->stats().textures, 0u);  // rolled back with the instance
+}
+
 TEST_F(PostgresStoreTest, AServerRestartMidRunLosesNoCommit) {
   const std::string url = freshDatabase();
   TempFolder dir;

@@ -91,6 +91,8 @@ struct RunSummary {
   // The texture database (docs/METRICS.md, "Texture economy" and "Matching").
   std::string db;
   std::optional<db::ServerLink> server_link;  // a server's database only
+  std::int64_t db_run_id = 0;                 // this run in the database's runs table
+  std::size_t db_instances = 0;               // instances (layers included) the map committed
   std::size_t textures_stored = 0;  // new textures this run stored (versions included)
   std::size_t patterns_stored = 0;
   std::size_t overlays = 0;          // overlay layers the map draws on patterned patches
