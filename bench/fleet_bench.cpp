@@ -89,6 +89,7 @@ std::size_t runsMissingInstances(const std::string& location,
 void concurrentReplays(PostgresCluster& cluster, int replays, const fs::path& work,
                        const std::set<std::string>& reference) {
   for (const bool postgres : {true, false}) {
+    for (const char* suffix : {"", "-wal", "-shm"}) fs::remove(work / ("fleet.db" + std::string(suffix)));
     const std::string db = postgres ? (cluster.createDatabase("fleet"), cluster.url("fleet"))
                                     : (work / "fleet.db").string();
     const auto start = Clock::now();
