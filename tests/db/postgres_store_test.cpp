@@ -1,6 +1,7 @@
 // The PostgreSQL store against a real, throwaway server (support/postgres_cluster.h): the same
 // results as the SQLite store, concurrent writers storing each texture once, a newer schema
 // refused, and credentials kept out of every message. Skips without the server binaries.
+#include <fstream>
 #include <set>
 #include <thread>
 #include <tuple>
@@ -218,6 +219,59 @@ TEST_F(PostgresStoreTest, ACommitNamingAMissingTextureOrRunIsRefusedWhole) {
             std::string::npos)
       << missing_run;
   EXPECT_EQ(store->stats().textures, 0u);  // rolled back with the instance
+}
+
+// docs/FLEET.md's SQL for a robot's role, as written there (its password and database
+// replaced).
+std::string robotRoleSql(const std::string& role, const std::string& password,
+                         const std::string& database) {
+  std::ifstream in(std::string(TESSERA_SOURCE_DIR) + "/docs/FLEET.md");
+  std::string line, sql;
+  bool inside = false;
+  while (std::getline(in, line)) {
+    if (line == "```sql") {
+      inside = true;
+    } else if (inside && line == "```") {
+      break;
+    } else if (inside) {
+      sql += line + '\n';
+    }
+  }
+  const auto replaceAll = [&sql](const std::string& from, const std::string& to) {
+    for (std::size_t at = sql.find(from); at != std::string::npos; at = sql.find(from, at)) {
+      sql.replace(at, from.size(), to);
+      at += to.size();
+    }
+  };
+  replaceAll("'...'", "'" + password + "'");
+  replaceAll("building7", database);
+  replaceAll("ROLE robot ", "ROLE " + role + " ");
+  replaceAll(" TO robot;", " TO " + role + ";");
+  return sql;
+}
+
+TEST_F(PostgresStoreTest, ARobotsRoleCommitsAndReadsButCannotDropOrMigrate) {
+  const std::string url = freshDatabase();
+  const std::string database = url.substr(url.rfind('/') + 1);
+  openTextureStore(url);  // the owner creates the tables
+  const std::string sql = robotRoleSql("robot_role_test", "robot-pw", database);
+  ASSERT_NE(sql.find("GRANT SELECT, INSERT ON textures TO robot_role_test;"), std::string::npos)
+      << sql;
+  ASSERT_TRUE(cluster_->psql(sql, database));
+  std::string as_robot = url;
+  as_robot.replace(as_robot.find("tessera@"), 8, "robot_role_test:robot-pw@");
+  {
+    const auto store = openTextureStore(as_robot);
+    commitRun(*store);
+    EXPECT_EQ(store->stats().textures, 3u);
+  }
+  EXPECT_FALSE(cluster_->psql("DROP TABLE textures", database, "robot_role_test"));
+  EXPECT_FALSE(cluster_->psql("DELETE FROM textures", database, "robot_role_test"));
+  // A migration (here: a database that says it is of schema 1) needs the owner.
+  ASSERT_TRUE(cluster_->psql("UPDATE meta SET value = '1' WHERE key = 'schema_version'", database));
+  const std::string message = errorOf([&] { openTextureStore(as_robot); });
+  EXPECT_NE(message.find("not allowed to create or migrate the schema"), std::string::npos)
+      << message;
 }
 
 TEST_F(PostgresStoreTest, AServerRestartMidRunLosesNoCommit) {

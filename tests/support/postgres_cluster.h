@@ -92,11 +92,12 @@ class PostgresCluster {
     return "postgresql://tessera@127.0.0.1:" + std::to_string(port_) + "/" + database;
   }
   // Runs SQL through psql against `database`; true when psql succeeded.
-  bool psql(const std::string& sql, const std::string& database = "tessera") const {
+  bool psql(const std::string& sql, const std::string& database = "tessera",
+            const std::string& user = "tessera") const {
     const std::string file = dir_.string() + "/statement.sql";
     { std::ofstream(file) << sql << '\n'; }
     return run("psql -q -v ON_ERROR_STOP=1 -h " + dir_.string() + " -p " + std::to_string(port_) +
-               " -U tessera -d " + database + " -f " + file + " > /dev/null 2>&1");
+               " -U " + user + " -d " + database + " -f " + file + " > /dev/null 2>&1");
   }
   bool createDatabase(const std::string& name) const {
     return run("createdb -h " + dir_.string() + " -p " + std::to_string(port_) + " -U tessera " +
