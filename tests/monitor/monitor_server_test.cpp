@@ -219,7 +219,7 @@ TEST(MonitorServer, AReplaysStatsEndWithItsReport) {
   pipeline::RunOptions run;
   run.out_dir = out;
   run.poses = pipeline::PoseSource::kGroundTruth;
-  run.max_frames = 160;
+  run.max_frames = 80;
   run.monitor = &monitor;
   pipeline::runPipeline(source, pipeline::loadRunConfig(std::nullopt), run);
 
