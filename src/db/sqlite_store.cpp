@@ -198,26 +198,9 @@ std::vector<std::int64_t> SqliteStore::writeCommit(const Commit& commit,
   Statement delete_older(db, kDeleteOlderVersions);
   Statement upsert(db, kUpsertInstance);
   for (const TextureInstance& instance : commit.instances) {
-    const std::string which =
-        instance.layer == 0 ? fmt::format("patch {}", instance.patch_id)
-                            : fmt::format("patch {} layer {}", instance.patch_id, instance.layer);
-    if (instance.layer < 0) {
-      throw core::Error(
-          fmt::format("{}: the instance of {} has a negative layer (0 is the "
-                      "patch's texture, 1.. its overlays)",
-                      location_, which));
-    }
-    std::int64_t texture_id = instance.texture_id;
-    if (texture_id < 0) {
-      const auto index = static_cast<std::size_t>(-(texture_id + 1));
-      if (index >= ids.size()) {
-        throw core::Error(
-            fmt::format("{}: the instance of {} refers to new texture {}, "
-                        "but the commit has {}",
-                        location_, which, index, ids.size()));
-      }
-      texture_id = ids[index];
-    } else if (!rowExists(texture_exists, texture_id)) {
+    const std::string which = instanceName(instance);
+    const std::int64_t texture_id = instanceTextureId(instance, ids, location_);
+    if (instance.texture_id >= 0 && !rowExists(texture_exists, texture_id)) {
       // The foreign key would refuse it too, but without saying which.
       throw core::Error(
           fmt::format("{}: the instance of {} refers to texture {}, which "

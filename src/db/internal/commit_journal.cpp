@@ -149,16 +149,7 @@ std::vector<std::int64_t> CommitJournal::append(const Commit& commit,
                        "texture_id, a, b, tx, ty, psnr_db, reused) VALUES (?, ?, ?, ?, ?, ?, ?, "
                        "?, ?, ?, ?, ?)");
     for (const TextureInstance& i : commit.instances) {
-      std::int64_t texture_id = i.texture_id;
-      if (texture_id < 0) {
-        const auto index = static_cast<std::size_t>(-(texture_id + 1));
-        if (index >= ids.size()) {
-          throw core::Error(fmt::format("{}: an instance of patch {} refers to new texture {}, "
-                                        "but the commit has {}",
-                                        path_.string(), i.patch_id, index, ids.size()));
-        }
-        texture_id = ids[index];
-      }
+      const std::int64_t texture_id = instanceTextureId(i, ids, path_.string());
       instance.reset();
       instance.bind(1, seq).bind(2, i.run_id).bind(3, std::int64_t{i.patch_id});
       instance.bind(4, std::int64_t{i.version}).bind(5, std::int64_t{i.layer}).bind(6, texture_id);

@@ -32,4 +32,28 @@ EncodedTexture encodeTexture(const TextureRecord& record, const std::string& loc
   return encoded;
 }
 
+std::string instanceName(const TextureInstance& instance) {
+  return instance.layer == 0
+             ? fmt::format("patch {}", instance.patch_id)
+             : fmt::format("patch {} layer {}", instance.patch_id, instance.layer);
+}
+
+std::int64_t instanceTextureId(const TextureInstance& instance,
+                               const std::vector<std::int64_t>& new_ids,
+                               const std::string& location) {
+  if (instance.layer < 0) {
+    throw core::Error(fmt::format("{}: the instance of {} has a negative layer (0 is the patch's "
+                                  "texture, 1.. its overlays)",
+                                  location, instanceName(instance)));
+  }
+  if (instance.texture_id >= 0) return instance.texture_id;
+  const auto index = static_cast<std::size_t>(-(instance.texture_id + 1));
+  if (index >= new_ids.size()) {
+    throw core::Error(fmt::format("{}: the instance of {} refers to new texture {}, but the "
+                                  "commit has {}",
+                                  location, instanceName(instance), index, new_ids.size()));
+  }
+  return new_ids[index];
+}
+
 }  // namespace tessera::db::internal
