@@ -18,12 +18,10 @@
 
 #include <fmt/format.h>
 #include <omp.h>
-#include <open3d/camera/PinholeCameraIntrinsic.h>
 #include <open3d/core/EigenConverter.h>
 #include <open3d/geometry/Image.h>
 #include <open3d/geometry/RGBDImage.h>
 #include <open3d/pipelines/integration/ScalableTSDFVolume.h>
-#include <open3d/pipelines/odometry/Odometry.h>
 #include <open3d/t/geometry/Image.h>
 #include <open3d/t/geometry/Utility.h>
 #include <open3d/t/geometry/VoxelBlockGrid.h>
@@ -35,6 +33,7 @@
 #include <opencv2/rgbd.hpp>
 
 #include "bench_frames.h"
+#include "open3d_loop.h"
 #include "tessera/core/intrinsics.h"
 #include "tessera/core/log.h"
 #include "tessera/eval/trajectory.h"
@@ -289,48 +288,6 @@ Timing opencvFrameToFrame(const std::vector<Frame>& frames, int factor) {
   return {total / static_cast<double>(frames.size()), ateNote(estimate, truth, failures)};
 }
 
-o3d::geometry::Image legacyImage(const cv::Mat& mat) {
-  o3d::geometry::Image image;
-  image.Prepare(mat.cols, mat.rows, mat.channels(), static_cast<int>(mat.elemSize1()));
-  for (int v = 0; v < mat.rows; ++v) {
-    std::memcpy(image.data_.data() + static_cast<std::size_t>(v) * mat.cols * mat.elemSize(),
-                mat.ptr(v), mat.cols * mat.elemSize());
-  }
-  return image;
-}
-
-// The loop a user would write with Open3D alone: its legacy RGB-D odometry (hybrid term,
-// default options) frame to frame, and ScalableTSDFVolume at full resolution with the same
-// voxels as tessera.
-Timing plainOpen3dLoop(const std::vector<Frame>& frames, const tessera::fusion::TsdfConfig& tsdf) {
-  o3d::pipelines::integration::ScalableTSDFVolume volume(
-      tsdf.voxel_size_m, tsdf.truncation_m, o3d::pipelines::integration::TSDFVolumeColorType::RGB8,
-      tsdf.block_resolution);
-  tessera::eval::Trajectory estimate, truth;
-  Isometry T_W_C = *frames.front().T_W_C_gt;
-  std::shared_ptr<o3d::geometry::RGBDImage> previous;
-  const auto start = Clock::now();
-  for (const Frame& frame : frames) {
-    const auto& k = frame.intrinsics;
-    const o3d::camera::PinholeCameraIntrinsic intrinsic(k.width, k.height, k.fx, k.fy, k.cx, k.cy);
-    const auto colour = legacyImage(frame.rgb);
-    const auto depth = legacyImage(frame.depth_mm);
-    auto grey = o3d::geometry::RGBDImage::CreateFromColorAndDepth(colour, depth, 1000.0, 4.0);
-    if (previous) {
-      const auto [ok, T_previous_current, information] =
-          o3d::pipelines::odometry::ComputeRGBDOdometry(*grey, *previous, intrinsic);
-      if (ok) T_W_C = T_W_C * Isometry(T_previous_current);
-    }
-    const auto rgb =
-        o3d::geometry::RGBDImage::CreateFromColorAndDepth(colour, depth, 1000.0, 4.0, false);
-    volume.Integrate(*rgb, intrinsic, T_W_C.inverse().matrix());
-    previous = grey;
-    estimate[frame.timestamp_ns] = T_W_C;
-    truth[frame.timestamp_ns] = *frame.T_W_C_gt;
-  }
-  return {msSince(start) / static_cast<double>(frames.size()), ateNote(estimate, truth)};
-}
-
 // tessera's own pipeline (tracking and integration stages in the flow graph) on the same
 // frames, with the default configuration.
 Timing tesseraPipeline(const std::vector<Frame>& frames, int threads) {
@@ -403,7 +360,14 @@ int main(int argc, char** argv) {
       }
     }
     fmt::print("\nTracking + fusion, whole run over the frames in memory\n");
-    const Timing plain = plainOpen3dLoop(frames, tessera::fusion::TsdfConfig{});
+    const auto loop = tessera::bench::plainOpen3dLoop(frames, tessera::fusion::TsdfConfig{});
+    std::string note = loop.ate_mm ? fmt::format("ATE {:.1f} mm over {} poses", *loop.ate_mm,
+                                                 loop.ate_poses)
+                                   : std::string("ATE: too few poses");
+    if (loop.odometry_failures > 0) {
+      note += fmt::format("; {} odometry failures", loop.odometry_failures);
+    }
+    const Timing plain{loop.ms_per_frame, note};
     const Timing ours = tesseraPipeline(frames, threads);
     printRow("plain Open3D loop (legacy odometry + ScalableTSDFVolume)", plain);
     printRow("tessera pipeline (default config)", ours);

@@ -1,7 +1,10 @@
 // Replay throughput: runs `tessera run`'s pipeline over a recording several times and prints
-// frames/s for the whole run and per stage (median over the repeats), plus peak memory.
+// frames/s for the whole run and per stage (median over the repeats), plus peak memory; then
+// the plain Open3D loop (legacy RGB-D odometry + ScalableTSDFVolume) over the same frames on
+// the same machine, and the ratio of the two.
 //
 //   replay_bench [SOURCE] [--repeat N] [--threads N] [--max-frames N] [--poses track|gt]
+//                [--intrinsics fx,fy,cx,cy] [--depth-scale UNITS_PER_M] [--skip-open3d]
 //
 // SOURCE (a dataset folder or an .oni recording) defaults to ../shared/data/rgbd/tum_fr1_rpy_40,
 // else the committed recordings/tum_fr1_rpy_20.oni.
@@ -14,6 +17,8 @@
 #include <opencv2/core/utility.hpp>
 
 #include "bench_frames.h"
+#include "open3d_loop.h"
+#include "tessera/core/intrinsics.h"
 #include "tessera/core/error.h"
 #include "tessera/core/log.h"
 #include "tessera/pipeline/flow_graph.h"
@@ -37,12 +42,18 @@ int main(int argc, char** argv) {
   int threads = 0;
   std::size_t max_frames = 0;
   std::string poses = "track";
+  std::string intrinsics_spec;
+  std::optional<double> depth_units_per_m;
+  bool skip_open3d = false;
   app.add_option("--poses", poses, "track (odometry) or gt (ground-truth poses)")
       ->check(CLI::IsMember({"track", "gt"}));
   app.add_option("SOURCE", source_path, "Dataset folder to replay");
   app.add_option("--repeat", repeat, "Runs to take the median over")->check(CLI::PositiveNumber);
   app.add_option("--threads", threads, "Worker threads (0: all cores)");
   app.add_option("--max-frames", max_frames, "Frames per run (0: all)");
+  app.add_option("--intrinsics", intrinsics_spec, "fx,fy,cx,cy as given to tessera run");
+  app.add_option("--depth-scale", depth_units_per_m, "Raw depth units per metre");
+  app.add_flag("--skip-open3d", skip_open3d, "Leave out the plain Open3D loop (it is slow)");
   CLI11_PARSE(app, argc, argv);
 
   source_path = tessera::bench::resolvedSource(source_path);
@@ -51,11 +62,13 @@ int main(int argc, char** argv) {
   cv::setNumThreads(threads);
 
   try {
+    std::optional<tessera::core::Intrinsics> intrinsics;
+    if (!intrinsics_spec.empty()) intrinsics = tessera::core::parseIntrinsicsSpec(intrinsics_spec);
     std::vector<double> fps;
     std::map<std::string, std::vector<double>> stage_median_ms, stage_alone_fps;
     std::size_t frames = 0, tsdf_bytes = 0;
     for (int run = 0; run < repeat; ++run) {
-      const auto source = tessera::bench::openSource(source_path);
+      const auto source = tessera::bench::openSource(source_path, intrinsics, depth_units_per_m);
       pipeline::RunOptions options;
       options.out_dir = fs::temp_directory_path() / "tessera_replay_bench";
       options.threads = threads;
@@ -86,6 +99,21 @@ int main(int argc, char** argv) {
     }
     fmt::print("  TSDF             {:8.1f} MB\n", static_cast<double>(tsdf_bytes) / 1e6);
     fmt::print("  peak RSS         {:8.1f} MB\n", pipeline::peakRssMb());
+    if (!skip_open3d) {
+      // The same frames, held in memory so that the loop's time has no decoding in it (which
+      // favours the loop: tessera's figures above include reading the recording).
+      const auto loaded = tessera::bench::loadFrames(source_path, max_frames, /*need_truth=*/false,
+                                                     intrinsics, depth_units_per_m);
+      const auto loop = tessera::bench::plainOpen3dLoop(loaded, tessera::fusion::TsdfConfig{});
+      const double loop_fps = 1000.0 / loop.ms_per_frame;
+      fmt::print("  plain Open3D loop {:7.1f} frames/s ({} frames in memory{}{})\n", loop_fps,
+                 loaded.size(),
+                 loop.ate_mm ? fmt::format(", ATE {:.1f} mm", *loop.ate_mm) : std::string(),
+                 loop.odometry_failures > 0
+                     ? fmt::format(", {} odometry failures", loop.odometry_failures)
+                     : std::string());
+      fmt::print("  tessera / Open3D {:8.1f}x\n", median(fps) / loop_fps);
+    }
   } catch (const tessera::core::Error& e) {
     fmt::print(stderr, "replay_bench: {}\n", e.what());
     return 1;

@@ -1,3 +1,5 @@
+#include <cmath>
+
 #include <gtest/gtest.h>
 
 #include "support/synthetic_office.h"
@@ -6,6 +8,7 @@
 #include "tessera/drivers/dataset_source.h"
 #include "tessera/eval/trajectory.h"
 #include "tessera/fusion/tracker.h"
+#include "tessera/planes/plane_detector.h"
 
 namespace tessera::fusion {
 namespace {
@@ -162,19 +165,35 @@ TEST(Tracker, RecoversAcrossATenFrameGap) {
   }
 }
 
+// The planes `frame` shows, in world coordinates at the tracked pose T_W_C.
+struct WorldPlane {
+  Eigen::Vector3d normal, centroid;
+};
+std::vector<WorldPlane> worldPlanes(const core::Frame& frame, const core::Isometry& T_W_C) {
+  std::vector<WorldPlane> out;
+  for (const auto& plane : planes::PlaneDetector(planes::PlaneDetectorConfig{}).detect(frame).planes) {
+    out.push_back({T_W_C.linear() * plane.normal_C, T_W_C * plane.centroid_C});
+  }
+  return out;
+}
+
 TEST(Tracker, RelocalisesAfterAReconnectWithTheCameraMoved) {
   // The device is away while the camera moves 30 cm and turns 20 degrees. Tracking on from the
   // last pose would put the frame, and the planes it sees, 30 cm off; relocalised against the
-  // keyframes before the gap, it lands where the map is. At 3 m, 0.3 degrees is 1.6 cm on a
-  // wall: the pose bounds below keep planes seen after the gap within 2 cm of those before.
+  // keyframes before the gap, it lands where the map is, and the planes seen after the gap line
+  // up with those seen before it.
   const synthetic::Scene scene =
       synthetic::loadScene(test::sourceDir() / "config/scenes/office.yaml");
   Tracker tracker(TrackerConfig{});
   const core::Isometry start = scene.cameraPose(0);
+  core::Frame before;
+  core::Isometry T_W_before = start;
   for (int i = 0; i < 5; ++i) {
-    core::Frame frame = officeFrameAt(scene, moved(start, {0.01 * i, 0.0, 0.0}, 0.0), i);
-    frame.timestamp_ns = static_cast<std::int64_t>(i) * 33'333'333;
-    ASSERT_NE(tracker.track(frame, start).status, TrackingStatus::kLost);
+    before = officeFrameAt(scene, moved(start, {0.01 * i, 0.0, 0.0}, 0.0), i);
+    before.timestamp_ns = static_cast<std::int64_t>(i) * 33'333'333;
+    const TrackingResult result = tracker.track(before, start);
+    ASSERT_NE(result.status, TrackingStatus::kLost);
+    T_W_before = result.T_W_C;
   }
   tracker.sourceInterrupted();
   const core::Isometry away = moved(start, {0.34, 0.0, 0.0}, 20.0);
@@ -184,6 +203,24 @@ TEST(Tracker, RelocalisesAfterAReconnectWithTheCameraMoved) {
   ASSERT_EQ(result.status, TrackingStatus::kRelocalised) << result.problem;
   EXPECT_LT(translationError(result.T_W_C, away), 0.015);
   EXPECT_LT(rotationErrorDeg(result.T_W_C, away), 0.3);
+
+  // Each plane seen after the gap that continues one seen before it (normals within 5
+  // degrees, centroids within 10 cm of its plane) lies within 2 cm of it. Without
+  // relocalisation the frame would be placed at the last pose, 30 cm and 20 degrees off.
+  const auto planes_before = worldPlanes(before, T_W_before);
+  const auto planes_after = worldPlanes(frame, result.T_W_C);
+  int matched = 0;
+  for (const WorldPlane& after : planes_after) {
+    for (const WorldPlane& seen : planes_before) {
+      const double offset = std::abs(seen.normal.dot(after.centroid - seen.centroid));
+      if (seen.normal.dot(after.normal) < std::cos(5.0 * M_PI / 180.0) || offset > 0.10) continue;
+      ++matched;
+      EXPECT_LT(offset, 0.02) << "plane at " << after.centroid.transpose();
+    }
+  }
+  EXPECT_GE(matched, 2) << planes_before.size() << " planes before, " << planes_after.size()
+                        << " after";
+
   // Tracking goes on from there.
   core::Frame next = officeFrameAt(scene, moved(start, {0.35, 0.0, 0.0}, 20.0), 101);
   next.timestamp_ns = 5'033'333'333;
