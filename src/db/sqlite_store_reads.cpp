@@ -1,25 +1,14 @@
 // The reads of the SQLite store (internal/sqlite_store.h). Each read is one SQL statement on a
 // pooled read-only connection, so it sees one committed snapshot: never half of a commit.
-#include <system_error>
-
 #include <fmt/format.h>
 
+#include "internal/file_bytes.h"
 #include "internal/sqlite_store.h"
 #include "internal/sqlite_texture_rows.h"
 #include "internal/texture_codec.h"
 #include "tessera/core/error.h"
 
 namespace tessera::db::internal {
-
-namespace {
-
-std::size_t fileBytes(const std::filesystem::path& path) {
-  std::error_code ec;
-  const std::uintmax_t bytes = std::filesystem::file_size(path, ec);
-  return ec ? 0 : static_cast<std::size_t>(bytes);
-}
-
-}  // namespace
 
 std::optional<std::int64_t> SqliteStore::findByContentKey(const std::string& key) const {
   const ReadLease db(*this);

@@ -13,12 +13,12 @@
 namespace tessera::match {
 namespace {
 
-constexpr std::uint64_t kSeed = 0x7e55e4a;  // any fixed value: reproducible FLANN
+constexpr std::uint64_t kIndexSeed = 0x7e55e4a;  // any fixed value: reproducible FLANN
 
 // Below this many vectors a linear scan is as fast as the index and exact.
 constexpr std::size_t kMinIndexed = 256;
 // FLANN leaves visited per query: enough for near-duplicates (a texture seen again) to be found.
-constexpr int kChecks = 64;
+constexpr int kIndexChecks = 64;
 constexpr int kTrees = 4;
 
 using internal::SeededRng;
@@ -33,7 +33,7 @@ struct CcvIndex::Impl {
 
   void rebuild(std::size_t dims) {
     const cv::Mat rows(static_cast<int>(ids.size()), static_cast<int>(dims), CV_32F, values.data());
-    SeededRng seeded(kSeed);
+    SeededRng seeded(kIndexSeed);
     // cv::flann::Index keeps its own copy of the rows, so `values` may grow afterwards.
     index = std::make_unique<cv::flann::Index>(rows, cv::flann::KDTreeIndexParams(kTrees),
                                                cvflann::FLANN_DIST_L1);
@@ -91,7 +91,7 @@ std::vector<CcvNeighbour> CcvIndex::query(const std::vector<float>& values, doub
     const int knn = static_cast<int>(std::min(k, impl.indexed));
     const cv::Mat query_row = cv::Mat(values).reshape(1, 1);
     cv::Mat indices, distances;
-    impl.index->knnSearch(query_row, indices, distances, knn, cv::flann::SearchParams(kChecks));
+    impl.index->knnSearch(query_row, indices, distances, knn, cv::flann::SearchParams(kIndexChecks));
     for (int j = 0; j < indices.cols; ++j) {
       const int row = indices.at<int>(0, j);
       if (row >= 0 && static_cast<std::size_t>(row) < impl.indexed) {

@@ -16,7 +16,7 @@
 namespace tessera::match {
 namespace {
 
-constexpr std::uint64_t kSeed = 0x5eed;  // any fixed value: reproducible FLANN
+constexpr std::uint64_t kMatcherSeed = 0x5eed;  // any fixed value: reproducible FLANN
 
 // Keypoints closer than this to the mask border are dropped: their descriptors would see what
 // lies outside the patch, which differs between two sightings of the same texture.
@@ -25,7 +25,7 @@ constexpr int kRansacIterations = 5000;
 constexpr int kRepeatedRansacIterations = 4000;
 constexpr double kRansacConfidence = 0.999;
 constexpr int kKdTrees = 4;
-constexpr int kChecks = 64;
+constexpr int kMatcherChecks = 64;
 constexpr double kClaheClipLimit = 3.0;
 constexpr int kClaheTiles = 8;
 
@@ -121,7 +121,7 @@ std::optional<FeatureMatch> similarityFrom(const Features& query, const Features
 }
 
 cv::Ptr<cv::DescriptorMatcher> makeMatcher(int descriptor_type) {
-  const auto search = cv::makePtr<cv::flann::SearchParams>(kChecks);
+  const auto search = cv::makePtr<cv::flann::SearchParams>(kMatcherChecks);
   if (descriptor_type == CV_32F) {
     return cv::makePtr<cv::FlannBasedMatcher>(cv::makePtr<cv::flann::KDTreeIndexParams>(kKdTrees),
                                               search);
@@ -162,7 +162,7 @@ std::optional<FeatureMatch> matchFeatures(const Features& query, const Features&
 
   std::vector<std::vector<cv::DMatch>> nearest;
   {
-    SeededRng seeded(kSeed);
+    SeededRng seeded(kMatcherSeed);
     makeMatcher(query.descriptors.type())
         ->knnMatch(query.descriptors, stored.descriptors, nearest, 2);
   }

@@ -16,7 +16,7 @@ namespace {
 using fake::FakeCamera;
 using fake::FakeEnding;
 
-constexpr int kWidth = 16, kHeight = 12;
+constexpr int kCaptureWidth = 16, kCaptureHeight = 12;
 const std::string kDepthNode = "/dev/video2";
 const std::string kDepthOnly = "v4l2://?depth=/dev/video2";
 
@@ -24,8 +24,8 @@ std::shared_ptr<FakeCamera> depthCamera(std::vector<std::uint32_t> formats) {
   auto camera = std::make_shared<FakeCamera>();
   camera->path = kDepthNode;
   camera->formats = std::move(formats);
-  camera->width = kWidth;
-  camera->height = kHeight;
+  camera->width = kCaptureWidth;
+  camera->height = kCaptureHeight;
   return camera;
 }
 
@@ -35,9 +35,9 @@ std::vector<cv::Mat> randomDepths(int count) {
   std::uniform_int_distribution<int> any(0, 65535);
   std::vector<cv::Mat> depths;
   for (int i = 0; i < count; ++i) {
-    cv::Mat depth(kHeight, kWidth, CV_16UC1);
-    for (int v = 0; v < kHeight; ++v) {
-      for (int u = 0; u < kWidth; ++u)
+    cv::Mat depth(kCaptureHeight, kCaptureWidth, CV_16UC1);
+    for (int v = 0; v < kCaptureHeight; ++v) {
+      for (int u = 0; u < kCaptureWidth; ++u)
         depth.at<std::uint16_t>(v, u) = static_cast<std::uint16_t>(any(rng));
     }
     depth.at<std::uint16_t>(0, 0) = 0;
@@ -91,7 +91,7 @@ TEST(Negotiation, PicksTheFirstPreferenceTheNodeOffersNotTheFirstOffered) {
     V4l2Capture capture(std::make_unique<fake::FakeV4l2Device>(camera), captureConfig(c.wanted));
     EXPECT_EQ(capture.format().fourcc, c.expected) << fourccName(capture.format().fourcc);
     EXPECT_EQ(camera->set_fourcc, c.expected);  // set on the node, not only chosen
-    EXPECT_EQ(capture.format().width, kWidth);
+    EXPECT_EQ(capture.format().width, kCaptureWidth);
     EXPECT_EQ(capture.offeredFormats(), c.offered);
   }
 }
@@ -142,7 +142,7 @@ TEST(Capture, Z16DepthRoundTripsExactlyWithTimestamps) {
     EXPECT_EQ(result.frame.timestamp_ns, camera->frames[i].timestamp_ns);
     EXPECT_EQ(result.frame.index, i);
     EXPECT_TRUE(result.frame.rgb.empty());
-    EXPECT_EQ(result.frame.intrinsics.width, kWidth);
+    EXPECT_EQ(result.frame.intrinsics.width, kCaptureWidth);
   }
   EXPECT_EQ(source.read().status, core::ReadStatus::kEndOfData);
   EXPECT_EQ(camera->buffers_granted, 4u);

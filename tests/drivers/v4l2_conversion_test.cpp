@@ -14,10 +14,10 @@ namespace {
 // YUYV pairs), so that every stripe's centre keeps its colour through any of the formats.
 const std::vector<cv::Vec3b> kColours = {{255, 0, 0},     {0, 255, 0}, {0, 0, 255},
                                          {255, 255, 255}, {0, 0, 0},   {200, 120, 40}};
-constexpr int kStripe = 16, kHeight = 16;
+constexpr int kStripe = 16, kStripeHeight = 16;
 
 cv::Mat stripes() {
-  cv::Mat rgb(kHeight, kStripe * static_cast<int>(kColours.size()), CV_8UC3);
+  cv::Mat rgb(kStripeHeight, kStripe * static_cast<int>(kColours.size()), CV_8UC3);
   for (int u = 0; u < rgb.cols; ++u)
     rgb.col(u).setTo(
         cv::Scalar(kColours[u / kStripe][0], kColours[u / kStripe][1], kColours[u / kStripe][2]));
@@ -46,7 +46,7 @@ void expectStripes(const cv::Mat& rgb, int tolerance) {
   ASSERT_EQ(rgb.cols, kStripe * static_cast<int>(kColours.size()));
   for (std::size_t i = 0; i < kColours.size(); ++i) {
     const cv::Vec3b got =
-        rgb.at<cv::Vec3b>(kHeight / 2, static_cast<int>(i) * kStripe + kStripe / 2);
+        rgb.at<cv::Vec3b>(kStripeHeight / 2, static_cast<int>(i) * kStripe + kStripe / 2);
     for (int c = 0; c < 3; ++c) {
       EXPECT_NEAR(got[c], kColours[i][c], tolerance)
           << "stripe " << i << " channel " << c << " (R, G, B order)";

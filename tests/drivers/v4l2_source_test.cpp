@@ -14,7 +14,7 @@ namespace {
 using fake::FakeCamera;
 using fake::FakeEnding;
 
-constexpr int kWidth = 8, kHeight = 6;
+constexpr int kSourceWidth = 8, kSourceHeight = 6;
 constexpr std::int64_t kStartNs = 5'000'000'000;
 const std::string kUri = "v4l2:///dev/video0?depth=/dev/video2";
 
@@ -25,8 +25,8 @@ std::shared_ptr<FakeCamera> camera(const std::string& path, std::uint32_t fourcc
   auto fake = std::make_shared<FakeCamera>();
   fake->path = path;
   fake->formats = {fourcc};
-  fake->width = kWidth;
-  fake->height = kHeight;
+  fake->width = kSourceWidth;
+  fake->height = kSourceHeight;
   return fake;
 }
 
@@ -35,7 +35,7 @@ std::shared_ptr<FakeCamera> camera(const std::string& path, std::uint32_t fourcc
 std::shared_ptr<FakeCamera> depthStream(int count, double period_ms) {
   auto depth = camera("/dev/video2", V4L2_PIX_FMT_Z16);
   for (int i = 0; i < count; ++i) {
-    const cv::Mat image(kHeight, kWidth, CV_16UC1, cv::Scalar(100 + i));
+    const cv::Mat image(kSourceHeight, kSourceWidth, CV_16UC1, cv::Scalar(100 + i));
     depth->frames.push_back(
         {kStartNs + microseconds(i * period_ms * 1e3), fake::z16Bytes(image), false});
   }
@@ -46,7 +46,7 @@ std::shared_ptr<FakeCamera> depthStream(int count, double period_ms) {
 std::shared_ptr<FakeCamera> colourStream(int count, double period_ms, double offset_ms) {
   auto colour = camera("/dev/video0", V4L2_PIX_FMT_RGB24);
   for (int j = 0; j < count; ++j) {
-    const cv::Mat image(kHeight, kWidth, CV_8UC3, cv::Scalar(j, 50, 60));
+    const cv::Mat image(kSourceHeight, kSourceWidth, CV_8UC3, cv::Scalar(j, 50, 60));
     colour->frames.push_back({kStartNs + microseconds((offset_ms + j * period_ms) * 1e3),
                               fake::rgb24Bytes(image), false});
   }
@@ -149,7 +149,7 @@ TEST(Pairing, CorruptJpegColourIsABadFrameAndTheNextPairIsFine) {
   const auto depth = depthStream(3, 1000.0 / 30.0);
   auto colour = camera("/dev/video0", V4L2_PIX_FMT_MJPEG);
   for (int j = 0; j < 4; ++j) {
-    const cv::Mat image(kHeight, kWidth, CV_8UC3, cv::Scalar(200, 40, 40));
+    const cv::Mat image(kSourceHeight, kSourceWidth, CV_8UC3, cv::Scalar(200, 40, 40));
     colour->frames.push_back(
         {kStartNs + microseconds(j * 1e6 / 30.0), fake::mjpegBytes(image, 95), false});
   }
@@ -168,7 +168,7 @@ TEST(Pairing, CorruptJpegColourIsABadFrameAndTheNextPairIsFine) {
 TEST(Source, RegisteredColourMustHaveTheDepthSize) {
   const auto depth = depthStream(1, 33.3);
   auto colour = camera("/dev/video0", V4L2_PIX_FMT_YUYV);
-  colour->width = 2 * kWidth;  // a colour node that is not registered to depth
+  colour->width = 2 * kSourceWidth;  // a colour node that is not registered to depth
   try {
     V4l2Source source(kUri, options({depth, colour}));
     FAIL() << "colour at another size than depth was accepted without calibration";

@@ -9,7 +9,7 @@ using nlohmann::json;
 
 // A wall 2 m in front of a camera at the origin looking along +z (n = -z, facing the camera),
 // 2 m x 1.6 m, which the camera sees whole; a poster lies 5 mm in front of it.
-json truthScene() {
+json wallAndPosterTruth() {
   auto plane = [](const std::string& id, double z, double w, double h) {
     return json{{"id", id},
                 {"normal", {0.0, 0.0, -1.0}},
@@ -50,7 +50,7 @@ json patches(std::initializer_list<json> list) {
 
 TEST(PlaneEvaluation, AnExactPatchFindsThePlaneAndThePosterCountsAsPartOfIt) {
   const PlaneEvaluation result =
-      evaluatePlanes(truthScene(), onePose(), patches({patch(0, 2.0, -1.0, 1.0, -0.8, 0.8)}),
+      evaluatePlanes(wallAndPosterTruth(), onePose(), patches({patch(0, 2.0, -1.0, 1.0, -0.8, 0.8)}),
                      core::Isometry::Identity());
   ASSERT_EQ(result.planes.size(), 1u);  // the poster is an overlay of the wall
   const PlaneResult& wall = result.planes.front();
@@ -65,7 +65,7 @@ TEST(PlaneEvaluation, AnExactPatchFindsThePlaneAndThePosterCountsAsPartOfIt) {
 
 TEST(PlaneEvaluation, ADuplicatePatchCountsAgainstPrecision) {
   const PlaneEvaluation result = evaluatePlanes(
-      truthScene(), onePose(),
+      wallAndPosterTruth(), onePose(),
       patches({patch(0, 2.0, -1.0, 1.0, -0.8, 0.8), patch(1, 2.0, -1.0, 0.0, -0.8, 0.0)}),
       core::Isometry::Identity());
   EXPECT_DOUBLE_EQ(result.recall, 1.0);
@@ -80,7 +80,7 @@ TEST(PlaneEvaluation, TheTilesOfOnePlaneAreEvaluatedTogether) {
   left["plane"] = 0;
   right["plane"] = 0;
   const auto tiles =
-      evaluatePlanes(truthScene(), onePose(), patches({left, right}), core::Isometry::Identity());
+      evaluatePlanes(wallAndPosterTruth(), onePose(), patches({left, right}), core::Isometry::Identity());
   EXPECT_EQ(tiles.patches, 1u);
   EXPECT_DOUBLE_EQ(tiles.recall, 1.0);
   EXPECT_DOUBLE_EQ(tiles.precision, 1.0);
@@ -88,7 +88,7 @@ TEST(PlaneEvaluation, TheTilesOfOnePlaneAreEvaluatedTogether) {
 
   right["plane"] = 1;
   const auto apart =
-      evaluatePlanes(truthScene(), onePose(), patches({left, right}), core::Isometry::Identity());
+      evaluatePlanes(wallAndPosterTruth(), onePose(), patches({left, right}), core::Isometry::Identity());
   EXPECT_EQ(apart.patches, 2u);
   EXPECT_DOUBLE_EQ(apart.recall, 0.0);
   EXPECT_DOUBLE_EQ(apart.precision, 0.5);
@@ -100,7 +100,7 @@ TEST(PlaneEvaluation, TheTilesOfOnePlaneAreEvaluatedTogether) {
 // part of the plane again and is a duplicate; the first is still the find.
 TEST(PlaneEvaluation, AWallMappedTwiceAfterDriftCountsOneDuplicate) {
   const auto twice = evaluatePlanes(
-      truthScene(), onePose(),
+      wallAndPosterTruth(), onePose(),
       patches({patch(0, 2.0, -1.0, 1.0, -0.8, 0.8), patch(1, 2.04, -0.9, 0.6, -0.8, 0.8)}),
       core::Isometry::Identity());
   EXPECT_EQ(twice.duplicate_patches, 1u);
@@ -109,7 +109,7 @@ TEST(PlaneEvaluation, AWallMappedTwiceAfterDriftCountsOneDuplicate) {
   EXPECT_DOUBLE_EQ(twice.precision, 0.5);
   // Beyond the duplicate bounds (20 cm off) it is another surface, not a copy.
   const auto apart = evaluatePlanes(
-      truthScene(), onePose(),
+      wallAndPosterTruth(), onePose(),
       patches({patch(0, 2.0, -1.0, 1.0, -0.8, 0.8), patch(1, 2.2, -0.9, 0.6, -0.8, 0.8)}),
       core::Isometry::Identity());
   EXPECT_EQ(apart.duplicate_patches, 0u);
@@ -117,12 +117,12 @@ TEST(PlaneEvaluation, AWallMappedTwiceAfterDriftCountsOneDuplicate) {
 
 TEST(PlaneEvaluation, APatchOffByTwoCentimetresOrCoveringHalfIsNotAFind) {
   const auto off =
-      evaluatePlanes(truthScene(), onePose(), patches({patch(0, 2.02, -1.0, 1.0, -0.8, 0.8)}),
+      evaluatePlanes(wallAndPosterTruth(), onePose(), patches({patch(0, 2.02, -1.0, 1.0, -0.8, 0.8)}),
                      core::Isometry::Identity());
   EXPECT_DOUBLE_EQ(off.recall, 0.0);
   EXPECT_DOUBLE_EQ(off.precision, 0.0);
   const auto half =
-      evaluatePlanes(truthScene(), onePose(), patches({patch(0, 2.0, -1.0, 0.0, -0.8, 0.8)}),
+      evaluatePlanes(wallAndPosterTruth(), onePose(), patches({patch(0, 2.0, -1.0, 0.0, -0.8, 0.8)}),
                      core::Isometry::Identity());
   EXPECT_DOUBLE_EQ(half.recall, 0.0);
   EXPECT_NEAR(half.planes.front().iou, 0.5, 0.03);
@@ -133,7 +133,7 @@ TEST(PlaneEvaluation, TheRunsWorldFrameIsMappedOntoTheTruthsFirst) {
   // The run's world is the truth's shifted 1 m along x: T_gt_est moves it back.
   core::Isometry T_gt_est = core::Isometry::Identity();
   T_gt_est.translation() = Eigen::Vector3d(-1.0, 0.0, 0.0);
-  const auto result = evaluatePlanes(truthScene(), onePose(),
+  const auto result = evaluatePlanes(wallAndPosterTruth(), onePose(),
                                      patches({patch(0, 2.0, 0.0, 2.0, -0.8, 0.8)}), T_gt_est);
   EXPECT_DOUBLE_EQ(result.recall, 1.0);
 }
@@ -142,7 +142,7 @@ TEST(PlaneEvaluation, APlaneBeyondTheDepthRangeIsNotCounted) {
   PlaneEvaluationOptions options;
   options.max_depth_m = 1.5;
   const auto result =
-      evaluatePlanes(truthScene(), onePose(), patches({}), core::Isometry::Identity(), options);
+      evaluatePlanes(wallAndPosterTruth(), onePose(), patches({}), core::Isometry::Identity(), options);
   EXPECT_EQ(result.planes_counted, 0u);
   EXPECT_NEAR(result.planes.front().seen_m2, 0.0, 1e-12);
 }

@@ -18,7 +18,7 @@ const char* kTiles =
     "{id: tiles, generator: tiles, seed: 3, tile_m: 0.3, grout_m: 0.006, tiles_per_period: 2}";
 
 // The floor z = 0 (normal +z, the camera above it), 2 m x 2 m, tiled.
-json truthScene() {
+json tiledFloorTruth() {
   return json{{"textures", {{{"id", "tiles"}, {"definition_yaml", kTiles}}}},
               {"planes",
                {{{"id", "floor"},
@@ -137,7 +137,7 @@ TEST(TextureEvaluation, AFaithfulBitmapScoresHighAndTheTsdfBaselineIsOptional) {
   const fs::path run = test::freshTempDir();
   const json patches = writeRun(run, Eigen::Vector2d::Zero());
   const TextureEvaluation result =
-      evaluateTextures(truthScene(), ".", kAbove, patches, run, core::Isometry::Identity(), nullptr,
+      evaluateTextures(tiledFloorTruth(), ".", kAbove, patches, run, core::Isometry::Identity(), nullptr,
                        centreSampling());
   ASSERT_EQ(result.patches.size(), 1u);
   EXPECT_EQ(result.patches[0].plane, "floor");
@@ -151,7 +151,7 @@ TEST(TextureEvaluation, APlacementErrorCostsPsnrThatRegistrationGivesBack) {
   // The bitmap shows the floor 1 cm along u and 5 mm along v from where it lies.
   const json patches = writeRun(run, Eigen::Vector2d(0.01, 0.005));
   const TextureEvaluation result =
-      evaluateTextures(truthScene(), ".", kAbove, patches, run, core::Isometry::Identity(), nullptr,
+      evaluateTextures(tiledFloorTruth(), ".", kAbove, patches, run, core::Isometry::Identity(), nullptr,
                        centreSampling());
   ASSERT_EQ(result.patches.size(), 1u);
   EXPECT_LT(result.patches[0].psnr_db, 30.0);
@@ -163,7 +163,7 @@ TEST(TextureEvaluation, AReuseOfTheSameTrueTexturePlacedRightIsNotAFalseMatch) {
   TwoPatchRun run = twoPatchRun();
   setInstance(run.patches["patches"][1], run.dir, 1, /*reused=*/true);  // identity: exact
   const TextureEvaluation result =
-      evaluateTextures(truthScene(), ".", kAbove, run.patches, run.dir, core::Isometry::Identity(),
+      evaluateTextures(tiledFloorTruth(), ".", kAbove, run.patches, run.dir, core::Isometry::Identity(),
                        nullptr, centreSampling());
   ASSERT_EQ(result.patches.size(), 2u);
   const PatchTextureResult& stored = patchResult(result, 1);
@@ -196,7 +196,7 @@ TEST(TextureEvaluation, AReuseFiveTexelsOffIsAFalseMatch) {
   // Patch texel (c, r) shows texture pixel (c + 5, r): the truth 2.5 cm along u.
   setInstance(run.patches["patches"][1], run.dir, 1, /*reused=*/true, 5.0, 0.0);
   const TextureEvaluation result =
-      evaluateTextures(truthScene(), ".", kAbove, run.patches, run.dir, core::Isometry::Identity(),
+      evaluateTextures(tiledFloorTruth(), ".", kAbove, run.patches, run.dir, core::Isometry::Identity(),
                        nullptr, centreSampling());
   const PatchTextureResult& reuse = patchResult(result, 2);
   ASSERT_TRUE(reuse.reuse_shift_texels.has_value());
@@ -217,7 +217,7 @@ TEST(TextureEvaluation, AReuseOfAnotherTextureIsAFalseMatch) {
   setInstance(run.patches["patches"][1], run.dir, 7, /*reused=*/true, 0.0, 0.0,
               sampled(cobbles, Eigen::Vector2d::Zero(), 160));
   const TextureEvaluation result =
-      evaluateTextures(truthScene(), ".", kAbove, run.patches, run.dir, core::Isometry::Identity(),
+      evaluateTextures(tiledFloorTruth(), ".", kAbove, run.patches, run.dir, core::Isometry::Identity(),
                        nullptr, centreSampling());
   const PatchTextureResult& reuse = patchResult(result, 2);
   EXPECT_EQ(reuse.texture_id, 7);
@@ -240,7 +240,7 @@ TEST(TextureEvaluation, StoringAnAlreadyStoredTrueTextureAgainIsAMissedMatch) {
               cv::imread((run.dir / "textures/patch_3.png").string(), cv::IMREAD_UNCHANGED));
   run.patches["patches"].push_back(third);
   const TextureEvaluation result =
-      evaluateTextures(truthScene(), ".", kAbove, run.patches, run.dir, core::Isometry::Identity(),
+      evaluateTextures(tiledFloorTruth(), ".", kAbove, run.patches, run.dir, core::Isometry::Identity(),
                        nullptr, centreSampling());
   ASSERT_EQ(result.patches.size(), 3u);
   EXPECT_FALSE(patchResult(result, 3).missed_match);
@@ -254,7 +254,7 @@ TEST(TextureEvaluation, StoringAnAlreadyStoredTrueTextureAgainIsAMissedMatch) {
 }
 
 TEST(TextureEvaluation, GroundTruthWithoutTextureDefinitionsIsAClearError) {
-  json truth = truthScene();
+  json truth = tiledFloorTruth();
   truth["textures"][0].erase("definition_yaml");
   const fs::path run = test::freshTempDir();
   const json patches = writeRun(run, Eigen::Vector2d::Zero());

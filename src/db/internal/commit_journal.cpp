@@ -5,6 +5,7 @@
 
 #include <fmt/format.h>
 
+#include "internal/file_bytes.h"
 #include "internal/schema_sql.h"
 #include "internal/sqlite_texture_rows.h"
 #include "tessera/core/error.h"
@@ -65,12 +66,6 @@ auto inTransaction(Connection& db, F&& write) {
     db.rollbackQuietly();
     throw;
   }
-}
-
-std::size_t fileBytes(const std::filesystem::path& path) {
-  std::error_code ec;
-  const std::uintmax_t bytes = std::filesystem::file_size(path, ec);
-  return ec ? 0 : static_cast<std::size_t>(bytes);
 }
 
 }  // namespace
