@@ -15,6 +15,7 @@
 #include "tessera/core/error.h"
 #include "tessera/db/store_copy.h"
 #include "tessera/db/texture_store.h"
+#include "tessera/db/texture_summary_json.h"
 #include "tessera/match/match_cascade.h"
 #include "tessera/monitor/monitor_server.h"
 #include "tessera/pipeline/run_config.h"
@@ -25,18 +26,6 @@ namespace tessera::cli {
 
 namespace {
 
-nlohmann::json summaryJson(const db::TextureSummary& t) {
-  return {{"id", t.id},
-          {"kind", db::kindName(t.kind)},
-          {"width", t.width},
-          {"height", t.height},
-          {"run_id", t.run_id},
-          {"source_patch", t.source_patch},
-          {"name", t.name},
-          {"uses", t.uses},
-          {"png_bytes", t.png_bytes}};
-}
-
 std::string provenance(const db::TextureSummary& t) {
   if (!t.name.empty()) return t.name;
   return fmt::format("run {} patch {}", t.run_id, t.source_patch);
@@ -46,7 +35,7 @@ int list(const db::TextureStore& store, bool json) {
   const std::vector<db::TextureSummary> textures = store.textures();
   if (json) {
     nlohmann::json out = nlohmann::json::array();
-    for (const auto& t : textures) out.push_back(summaryJson(t));
+    for (const auto& t : textures) out.push_back(db::summaryJson(t));
     fmt::print("{}\n", out.dump(2));
     return 0;
   }
@@ -120,7 +109,7 @@ int exportAll(const db::TextureStore& store, const std::filesystem::path& out_di
     if (!record) continue;
     const std::string file = fmt::format("texture_{}.png", t.id);
     texture::writeRgbaPng(out_dir / file, record->rgb, record->mask);
-    nlohmann::json entry = summaryJson(t);
+    nlohmann::json entry = db::summaryJson(t);
     entry["file"] = file;
     index.push_back(entry);
   }

@@ -15,6 +15,8 @@
 #include "page.h"
 #include "tessera/core/error.h"
 #include "tessera/db/texture_store.h"
+#include "tessera/db/texture_summary_json.h"
+#include "tessera/texture/bitmap_export.h"
 
 // Last: it brings <resolv.h>, whose _res macro breaks Eigen headers included after it.
 #include <httplib.h>
@@ -169,16 +171,9 @@ void MonitorServer::Impl::serveTextures(httplib::Response& res) {
     std::lock_guard lock(db_mutex);
     if (db::TextureStore* db = textureStore()) {
       for (const db::TextureSummary& t : db->textures()) {
-        list.push_back({{"id", t.id},
-                        {"kind", db::kindName(t.kind)},
-                        {"width", t.width},
-                        {"height", t.height},
-                        {"uses", t.uses},
-                        {"run_id", t.run_id},
-                        {"source_patch", t.source_patch},
-                        {"name", t.name},
-                        {"png_bytes", t.png_bytes},
-                        {"thumbnail", fmt::format("/textures/{}.png", t.id)}});
+        nlohmann::json entry = db::summaryJson(t);
+        entry["thumbnail"] = fmt::format("/textures/{}.png", t.id);
+        list.push_back(std::move(entry));
       }
     }
   } catch (const std::exception& e) {
@@ -200,14 +195,7 @@ void MonitorServer::Impl::serveThumbnail(std::int64_t id, httplib::Response& res
       const std::optional<db::TextureRecord> texture = db->texture(id);
       if (texture && !texture->rgb.empty()) {
         // Stored RGB with its mask as alpha, as the map's PNGs; shrunk to thumbnail size.
-        cv::Mat bgra;
-        cv::cvtColor(texture->rgb, bgra, cv::COLOR_RGB2BGRA);
-        if (!texture->mask.empty()) {
-          cv::Mat channels[4];
-          cv::split(bgra, channels);
-          channels[3] = texture->mask;
-          cv::merge(channels, 4, bgra);
-        }
+        cv::Mat bgra = texture::bgraImage(texture->rgb, texture->mask);
         const double scale =
             std::min(1.0, static_cast<double>(kThumbnailPx) / std::max(bgra.cols, bgra.rows));
         if (scale < 1.0) cv::resize(bgra, bgra, {}, scale, scale, cv::INTER_AREA);

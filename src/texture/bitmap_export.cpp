@@ -23,11 +23,15 @@ void writePng(const std::filesystem::path& path, const cv::Mat& image) {
 
 }  // namespace
 
-void writeRgbaPng(const std::filesystem::path& path, const cv::Mat& rgb, const cv::Mat& mask) {
+cv::Mat bgraImage(const cv::Mat& rgb, const cv::Mat& mask) {
   cv::Mat bgra;
-  cv::cvtColor(rgb, bgra, cv::COLOR_RGB2BGRA);
-  cv::insertChannel(mask, bgra, 3);
-  writePng(path, bgra);
+  cv::cvtColor(rgb, bgra, cv::COLOR_RGB2BGRA);  // alpha 255
+  if (!mask.empty()) cv::insertChannel(mask, bgra, 3);
+  return bgra;
+}
+
+void writeRgbaPng(const std::filesystem::path& path, const cv::Mat& rgb, const cv::Mat& mask) {
+  writePng(path, bgraImage(rgb, mask));
 }
 
 planes::TextureBinding bindingOf(const PatchBitmap& bitmap, const std::string& image,

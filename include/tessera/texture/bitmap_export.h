@@ -21,6 +21,10 @@ planes::TextureBindings currentBindings(const planes::TextureBindings& written,
                                         const planes::PatchMap& map,
                                         const std::filesystem::path& out_dir);
 
+// An RGB image (CV_8UC3) as BGRA for OpenCV's PNG writer, its alpha `mask` (CV_8UC1), or
+// opaque when `mask` is empty.
+cv::Mat bgraImage(const cv::Mat& rgb, const cv::Mat& mask);
+
 // An RGB image (CV_8UC3) as an RGBA PNG whose alpha is `mask` (CV_8UC1). Throws core::Error
 // naming the file when it cannot be written.
 void writeRgbaPng(const std::filesystem::path& path, const cv::Mat& rgb, const cv::Mat& mask);
