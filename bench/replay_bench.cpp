@@ -18,8 +18,8 @@
 
 #include "bench_frames.h"
 #include "open3d_loop.h"
-#include "tessera/core/intrinsics.h"
 #include "tessera/core/error.h"
+#include "tessera/core/intrinsics.h"
 #include "tessera/core/log.h"
 #include "tessera/pipeline/flow_graph.h"
 #include "tessera/pipeline/run.h"
