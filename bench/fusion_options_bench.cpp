@@ -36,7 +36,7 @@
 #include "open3d_loop.h"
 #include "tessera/core/intrinsics.h"
 #include "tessera/core/log.h"
-#include "tessera/eval/trajectory.h"
+#include "tessera/core/trajectory.h"
 #include "tessera/fusion/tsdf_map.h"
 #include "tessera/pipeline/run.h"
 
@@ -109,9 +109,9 @@ constexpr float kTruncVoxels = 3.0f;  // truncation in voxels, as tessera's defa
 
 // ATE of a tracked trajectory, and how many frames kept the previous pose because the
 // odometry failed.
-std::string ateNote(const tessera::eval::Trajectory& estimate,
-                    const tessera::eval::Trajectory& truth, int odometry_failures = 0) {
-  const auto ate = tessera::eval::absoluteTrajectoryError(estimate, truth);
+std::string ateNote(const tessera::core::Trajectory& estimate,
+                    const tessera::core::Trajectory& truth, int odometry_failures = 0) {
+  const auto ate = tessera::core::absoluteTrajectoryError(estimate, truth);
   std::string note = ate ? fmt::format("ATE {:.1f} mm over {} poses", ate->rmse_m * 1e3, ate->pairs)
                          : std::string("ATE: too few poses");
   if (odometry_failures > 0) note += fmt::format("; {} odometry failures", odometry_failures);
@@ -227,7 +227,7 @@ cv::Mat matOf(const o3d::core::Tensor& tensor, int type) {
 Timing frameToModel(const std::vector<Frame>& frames, int factor) {
   auto grid = makeBlockGrid(0.01);
   cv::Ptr<cv::rgbd::RgbdICPOdometry> odometry;
-  tessera::eval::Trajectory estimate, truth;
+  tessera::core::Trajectory estimate, truth;
   Isometry T_W_C = *frames.front().T_W_C_gt;
   o3d::core::Tensor blocks;
   double total = 0.0, raycast_ms = 0.0;
@@ -265,7 +265,7 @@ Timing frameToModel(const std::vector<Frame>& frames, int factor) {
 // OpenCV's RgbdICPOdometry, frame to frame (what the first tracker did).
 Timing opencvFrameToFrame(const std::vector<Frame>& frames, int factor) {
   cv::Ptr<cv::rgbd::RgbdICPOdometry> odometry;
-  tessera::eval::Trajectory estimate, truth;
+  tessera::core::Trajectory estimate, truth;
   Isometry T_W_C = *frames.front().T_W_C_gt;
   OdometryImages previous;
   double total = 0.0;

@@ -13,7 +13,7 @@
 #include "tessera/core/error.h"
 #include "tessera/core/log.h"
 #include "tessera/core/registration.h"
-#include "tessera/eval/trajectory.h"
+#include "tessera/core/trajectory.h"
 #include "tessera/fusion/tracker.h"
 #include "tessera/loop/loop_graph.h"
 #include "tessera/pipeline/run_config.h"
@@ -43,7 +43,7 @@ int main(int argc, char** argv) {
     auto source = bench::openSource(source_path, intrinsics, depth_units_per_m);
     fusion::Tracker tracker(config.tracker);
     tessera::loop::LoopGraph graph(config.loop_closure);
-    tessera::eval::Trajectory estimate, truth;
+    tessera::core::Trajectory estimate, truth;
     std::optional<tessera::core::Isometry> first_truth;
     double tracking_ms = 0.0;
     std::size_t frames = 0;
@@ -92,8 +92,8 @@ int main(int argc, char** argv) {
                  loop.query, loop.match, loop.revisit.fitness, loop.revisit.rmse_m * 1e3,
                  loop.revisit.feature_inliers);
     }
-    const auto before = tessera::eval::absoluteTrajectoryError(estimate, truth);
-    const auto after = tessera::eval::absoluteTrajectoryError(graph.correct(estimate), truth);
+    const auto before = tessera::core::absoluteTrajectoryError(estimate, truth);
+    const auto after = tessera::core::absoluteTrajectoryError(graph.correct(estimate), truth);
     if (before && after) {
       fmt::print("ATE tracked {:.1f} mm RMSE ({:.1f} max); after closure {:.1f} mm ({:.1f} max)\n",
                  before->rmse_m * 1e3, before->max_m * 1e3, after->rmse_m * 1e3,

@@ -10,7 +10,7 @@
 #include <open3d/pipelines/odometry/Odometry.h>
 #include <open3d/utility/Logging.h>
 
-#include "tessera/eval/trajectory.h"
+#include "tessera/core/trajectory.h"
 
 namespace tessera::bench {
 namespace {
@@ -37,7 +37,7 @@ PlainLoopResult plainOpen3dLoop(const std::vector<core::Frame>& frames,
   o3d::pipelines::integration::ScalableTSDFVolume volume(
       tsdf.voxel_size_m, tsdf.truncation_m, o3d::pipelines::integration::TSDFVolumeColorType::RGB8,
       tsdf.block_resolution);
-  eval::Trajectory estimate, truth;
+  core::Trajectory estimate, truth;
   core::Isometry T_W_C = frames.front().T_W_C_gt.value_or(core::Isometry::Identity());
   std::shared_ptr<o3d::geometry::RGBDImage> previous;
   const auto start = std::chrono::steady_clock::now();
@@ -67,7 +67,7 @@ PlainLoopResult plainOpen3dLoop(const std::vector<core::Frame>& frames,
       std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count() /
       static_cast<double>(frames.size());
   if (truth.size() == estimate.size()) {
-    if (const auto ate = eval::absoluteTrajectoryError(estimate, truth)) {
+    if (const auto ate = core::absoluteTrajectoryError(estimate, truth)) {
       result.ate_mm = ate->rmse_m * 1e3;
       result.ate_poses = static_cast<int>(ate->pairs);
     }

@@ -17,7 +17,7 @@
 #include "tessera/core/error.h"
 #include "tessera/core/intrinsics.h"
 #include "tessera/core/log.h"
-#include "tessera/eval/trajectory.h"
+#include "tessera/core/trajectory.h"
 
 namespace {
 
@@ -74,7 +74,7 @@ int main(int argc, char** argv) {
       throw Error(fmt::format("{}: has only {} frames", source_path, frames.size()));
     }
     const tessera::core::Frame& frame = frames[frame_index];
-    const auto trajectory = tessera::eval::readTumTrajectory(run_dir + "/trajectory.txt");
+    const auto trajectory = tessera::core::readTumTrajectory(run_dir + "/trajectory.txt");
     // trajectory.txt keeps timestamps to the microsecond: take the pose nearest in time.
     auto pose = trajectory.lower_bound(frame.timestamp_ns - 1000);
     if (pose != trajectory.end() && std::abs(pose->first - frame.timestamp_ns) > 1000) {

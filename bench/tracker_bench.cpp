@@ -16,7 +16,7 @@
 #include "tessera/core/error.h"
 #include "tessera/core/log.h"
 #include "tessera/core/pose.h"
-#include "tessera/eval/trajectory.h"
+#include "tessera/core/trajectory.h"
 #include "tessera/fusion/tracker.h"
 
 namespace {
@@ -70,7 +70,7 @@ int main(int argc, char** argv) {
     const auto all =
         bench::loadFrames(source_path, max_frames, true, intrinsics, depth_units_per_m);
     fusion::Tracker tracker(config);
-    tessera::eval::Trajectory estimate, truth;
+    tessera::core::Trajectory estimate, truth;
     std::vector<double> ms;
     int lost = 0, restarts = 0, relocalised = 0;
     std::pair<double, std::uint64_t> worst_step{0.0, 0};
@@ -111,7 +111,7 @@ int main(int argc, char** argv) {
     std::sort(sorted.begin(), sorted.end());
     double mean = 0.0;
     for (double v : ms) mean += v / static_cast<double>(ms.size());
-    const auto ate = tessera::eval::absoluteTrajectoryError(estimate, truth);
+    const auto ate = tessera::core::absoluteTrajectoryError(estimate, truth);
     fmt::print(
         "{}: {} frames (every {}), scale {}, iterations [{}], velocity {}: {:.1f} ms/frame mean, "
         "{:.1f} median; lost {}, relocalised {}, restarts {}; worst step {:.1f} mm (frame {}); "

@@ -51,7 +51,7 @@
 #include "bench_frames.h"
 #include "tessera/core/error.h"
 #include "tessera/core/log.h"
-#include "tessera/eval/trajectory.h"
+#include "tessera/core/trajectory.h"
 #include "tessera/eval/view_evaluation.h"
 #include "tessera/eval/view_render.h"
 
@@ -98,7 +98,7 @@ struct Stopwatch {
   }
 };
 
-std::optional<Isometry> poseAt(const tessera::eval::Trajectory& poses, std::int64_t timestamp_ns) {
+std::optional<Isometry> poseAt(const tessera::core::Trajectory& poses, std::int64_t timestamp_ns) {
   auto it = poses.lower_bound(timestamp_ns - kMaxPoseGapNs);
   if (it == poses.end() || it->first > timestamp_ns + kMaxPoseGapNs) return std::nullopt;
   return it->second;
@@ -240,8 +240,8 @@ int run(const Arguments& args) {
     throw tessera::core::Error(fmt::format("{}: no such run folder", args.run_dir));
   }
   const int holdout_every = readHoldoutEvery(run_dir / "report.json");
-  const tessera::eval::Trajectory poses =
-      tessera::eval::readTumTrajectory(run_dir / "trajectory.txt");
+  const tessera::core::Trajectory poses =
+      tessera::core::readTumTrajectory(run_dir / "trajectory.txt");
   const tessera::eval::RenderMesh patches = tessera::eval::readTexturedObj(run_dir / "patches.obj");
   const tessera::eval::RenderMesh run_mesh = tessera::eval::readColouredPly(run_dir / "mesh.ply");
 
@@ -255,7 +255,7 @@ int run(const Arguments& args) {
   std::vector<TrainingView> training;
   std::size_t held_out = 0;
   for (const Frame& frame : frames) {
-    if (tessera::eval::isHeldOut(frame.index, holdout_every)) {
+    if (tessera::core::isHeldOut(frame.index, holdout_every)) {
       ++held_out;
       continue;
     }

@@ -1,10 +1,27 @@
 #!/usr/bin/env bash
 # Configures and builds tessera in Release into ./build (or $BUILD_DIR).
+#   scripts/build.sh [-D...]          everything: the executable, the tests and the benchmarks
+#   scripts/build.sh --main [-D...]   only what `tessera run` needs: the executable and the
+#                                     default recording (no tests, no benchmarks)
 # Warnings are errors when TESSERA_WERROR=ON or when running under CI (CI=true).
-# Extra arguments go to CMake's configure step.
+# Other arguments go to CMake's configure step.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 build_dir="${BUILD_DIR:-build}"
 werror="${TESSERA_WERROR:-$([ "${CI:-}" = "true" ] && echo ON || echo OFF)}"
-cmake -S . -B "$build_dir" -DCMAKE_BUILD_TYPE="${BUILD_TYPE:-Release}" -DTESSERA_WERROR="$werror" "$@"
+if [ "${1:-}" = "--main" ]; then
+  shift
+  # The unity build compiles several sources per compiler run, so the heavy headers (Open3D,
+  # OpenCV) are parsed fewer times. Should it ever fail, the build goes again file by file.
+  main_build() {
+    cmake -S . -B "$build_dir" -DCMAKE_BUILD_TYPE="${BUILD_TYPE:-Release}" -DTESSERA_WERROR=OFF \
+      -DTESSERA_BUILD_TESTS=OFF -DTESSERA_BUILD_BENCH=OFF -DTESSERA_RENDER_DEFAULT_RECORDING=ON \
+      -DCMAKE_UNITY_BUILD_BATCH_SIZE=8 "$@"
+    cmake --build "$build_dir" -j "$(nproc)" --target tessera default_recording
+  }
+  main_build -DCMAKE_UNITY_BUILD=ON "$@" || main_build -DCMAKE_UNITY_BUILD=OFF "$@"
+  exit
+fi
+cmake -S . -B "$build_dir" -DCMAKE_BUILD_TYPE="${BUILD_TYPE:-Release}" -DTESSERA_WERROR="$werror" \
+  -DTESSERA_BUILD_TESTS=ON -DTESSERA_BUILD_BENCH=ON -DCMAKE_UNITY_BUILD=OFF "$@"
 cmake --build "$build_dir" -j "$(nproc)"

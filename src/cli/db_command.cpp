@@ -19,6 +19,7 @@
 #include "tessera/match/match_cascade.h"
 #include "tessera/monitor/monitor_server.h"
 #include "tessera/pipeline/run_config.h"
+#include "tessera/reuse/store_catalog.h"
 #include "tessera/texture/bitmap_export.h"
 #include "texture_image.h"
 
@@ -129,14 +130,8 @@ int import(db::TextureStore& store, const DbArguments& args) {
     cv::Mat rgb, mask;
     readTextureImage(path, rgb, mask);
     const match::TextureDescription description = match::describeTexture(rgb, mask, config.match);
-    db::TextureRecord record;
-    record.kind = args.pattern ? db::TextureKind::kPattern : db::TextureKind::kSingle;
-    record.rgb = rgb;
-    record.mask = mask;
-    record.ccv = description.ccv.values;
-    record.feature_kind = description.features.kind;
-    record.keypoints = description.features.keypoints;
-    record.descriptors = description.features.descriptors;
+    db::TextureRecord record = reuse::textureRecordOf(
+        description, args.pattern ? db::TextureKind::kPattern : db::TextureKind::kSingle);
     if (args.pattern) {  // the image is one period in each direction
       record.lattice = db::Lattice{{rgb.cols, 0.0}, {0.0, rgb.rows}};
     }

@@ -115,8 +115,8 @@ void findOverlays(std::vector<TruthPlane>& planes, const PlaneEvaluationOptions&
 
 // Marks, in each plane's raster, the cells the camera saw it at (nearest surface along each
 // ray, within the depth range), from the ground-truth poses.
-void markSeen(std::vector<TruthPlane>& planes, const nlohmann::json& truth, const Trajectory& poses,
-              const PlaneEvaluationOptions& options) {
+void markSeen(std::vector<TruthPlane>& planes, const nlohmann::json& truth,
+              const core::Trajectory& poses, const PlaneEvaluationOptions& options) {
   const auto& k = truth.at("intrinsics");
   const double fx = k.at("fx"), fy = k.at("fy"), cx = k.at("cx"), cy = k.at("cy");
   const int width = k.at("width"), height = k.at("height");
@@ -229,7 +229,7 @@ int countDuplicates(const std::vector<cv::Mat>& cells, double min_overlap) {
 
 }  // namespace
 
-PlaneEvaluation evaluatePlanes(const nlohmann::json& truth, const Trajectory& truth_poses,
+PlaneEvaluation evaluatePlanes(const nlohmann::json& truth, const core::Trajectory& truth_poses,
                                const nlohmann::json& patches_json, const core::Isometry& T_gt_est,
                                const PlaneEvaluationOptions& options) {
   std::vector<TruthPlane> planes;

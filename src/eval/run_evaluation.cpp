@@ -9,9 +9,9 @@
 #include <spdlog/spdlog.h>
 
 #include "tessera/core/error.h"
+#include "tessera/core/trajectory.h"
 #include "tessera/eval/plane_evaluation.h"
 #include "tessera/eval/texture_evaluation.h"
-#include "tessera/eval/trajectory.h"
 #include "tessera/fusion/mesh_colours.h"
 
 namespace tessera::eval {
@@ -36,8 +36,8 @@ nlohmann::json readJson(const std::filesystem::path& path) {
   return json;
 }
 
-Trajectory groundTruthTrajectory(const nlohmann::json& gt) {
-  Trajectory trajectory;
+core::Trajectory groundTruthTrajectory(const nlohmann::json& gt) {
+  core::Trajectory trajectory;
   for (const auto& frame : gt.value("frames", nlohmann::json::array())) {
     if (!frame.contains("T_W_C")) continue;
     const auto p = frame["T_W_C"].get<std::vector<double>>();
@@ -160,18 +160,18 @@ nlohmann::json evaluateRun(const std::filesystem::path& run_dir,
 
   nlohmann::json figures = {{"ate_m", nullptr}, {"ate_max_m", nullptr}, {"ate_pairs", 0}};
   const auto trajectory_path = run_dir / "trajectory.txt";
-  const Trajectory truth_poses = groundTruthTrajectory(gt);
+  const core::Trajectory truth_poses = groundTruthTrajectory(gt);
   core::Isometry T_gt_est = core::Isometry::Identity();
   if (std::filesystem::exists(trajectory_path)) {
-    const Trajectory estimate = readTumTrajectory(trajectory_path);
-    if (const auto ate = absoluteTrajectoryError(estimate, truth_poses)) {
+    const core::Trajectory estimate = core::readTumTrajectory(trajectory_path);
+    if (const auto ate = core::absoluteTrajectoryError(estimate, truth_poses)) {
       T_gt_est = ate->T_gt_est;
       figures["ate_m"] = ate->rmse_m;
       figures["ate_max_m"] = ate->max_m;
       figures["ate_pairs"] = ate->pairs;
-      Trajectory aligned;
+      core::Trajectory aligned;
       for (const auto& [t, pose] : estimate) aligned[t] = ate->T_gt_est * pose;
-      writeTumTrajectory(aligned, run_dir / "trajectory_aligned.txt");
+      core::writeTumTrajectory(aligned, run_dir / "trajectory_aligned.txt");
     }
   }
   // Loop closure's corrected poses, when the run closed loops. The patch map ends in their
@@ -179,7 +179,8 @@ nlohmann::json evaluateRun(const std::filesystem::path& run_dir,
   figures["ate_after_closure_m"] = nullptr;
   const auto closed_path = run_dir / "trajectory_closed.txt";
   if (std::filesystem::exists(closed_path)) {
-    if (const auto ate = absoluteTrajectoryError(readTumTrajectory(closed_path), truth_poses)) {
+    if (const auto ate =
+            core::absoluteTrajectoryError(core::readTumTrajectory(closed_path), truth_poses)) {
       figures["ate_after_closure_m"] = ate->rmse_m;
       T_gt_est = ate->T_gt_est;
     }
@@ -231,12 +232,12 @@ nlohmann::json evaluateRunViews(const std::filesystem::path& run_dir, core::Fram
   }
   const RenderMesh patches = readTexturedMap(run_dir / options.map_file);
   const RenderMesh mesh = readColouredPly(run_dir / "mesh.ply");
-  const Trajectory poses = readTumTrajectory(run_dir / "trajectory.txt");
+  const core::Trajectory poses = core::readTumTrajectory(run_dir / "trajectory.txt");
   // After a loop closure the patch map lies in the frame of the corrected poses; the TSDF
   // mesh stays in the tracked one.
   const auto closed_path = run_dir / "trajectory_closed.txt";
-  const std::optional<Trajectory> closed =
-      std::filesystem::exists(closed_path) ? std::optional(readTumTrajectory(closed_path))
+  const std::optional<core::Trajectory> closed =
+      std::filesystem::exists(closed_path) ? std::optional(core::readTumTrajectory(closed_path))
                                            : std::nullopt;
   const ViewEvaluation views = evaluateViews(
       {{"patches", &patches, closed ? &*closed : nullptr}, {"mesh", &mesh, nullptr}}, frames,

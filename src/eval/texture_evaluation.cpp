@@ -340,13 +340,11 @@ void judgePattern(const nlohmann::json& instance, const TexturedPlane& plane,
 
 }  // namespace
 
-TextureEvaluation evaluateTextures(const nlohmann::json& truth,
-                                   const std::filesystem::path& truth_dir,
-                                   const Trajectory& truth_poses, const nlohmann::json& patches,
-                                   const std::filesystem::path& run_dir,
-                                   const core::Isometry& T_gt_est,
-                                   const fusion::MeshColourSampler* baseline,
-                                   const TextureEvaluationOptions& options) {
+TextureEvaluation evaluateTextures(
+    const nlohmann::json& truth, const std::filesystem::path& truth_dir,
+    const core::Trajectory& truth_poses, const nlohmann::json& patches,
+    const std::filesystem::path& run_dir, const core::Isometry& T_gt_est,
+    const fusion::MeshColourSampler* baseline, const TextureEvaluationOptions& options) {
   // Image textures' relative paths start at the scene file's folder, when it is still there.
   std::filesystem::path texture_dir = truth_dir;
   if (truth.contains("scene_dir") && truth["scene_dir"].is_string() &&

@@ -17,7 +17,7 @@ namespace {
 
 constexpr std::int64_t kMaxPoseGapNs = 1'000'000;  // a pose belongs to a frame within 1 ms
 
-std::optional<core::Isometry> poseAt(const Trajectory& poses, std::int64_t timestamp_ns) {
+std::optional<core::Isometry> poseAt(const core::Trajectory& poses, std::int64_t timestamp_ns) {
   auto it = poses.lower_bound(timestamp_ns - kMaxPoseGapNs);
   if (it == poses.end() || it->first > timestamp_ns + kMaxPoseGapNs) return std::nullopt;
   return it->second;
@@ -75,10 +75,6 @@ std::size_t strideFor(std::size_t total, int wanted) {
 
 }  // namespace
 
-bool isHeldOut(std::uint64_t index, int holdout_every) {
-  return holdout_every > 1 && (index + 1) % static_cast<std::uint64_t>(holdout_every) == 0;
-}
-
 std::optional<double> maskedPsnr(const cv::Mat& rendered, const cv::Mat& captured,
                                  const cv::Mat& mask) {
   double squared = 0.0;
@@ -127,7 +123,7 @@ std::size_t ViewEvaluation::viewCount(bool held_out) const {
 }
 
 ViewEvaluation evaluateViews(const std::vector<ViewModel>& models, core::FrameSource& frames,
-                             const Trajectory& poses, const ViewEvaluationOptions& options) {
+                             const core::Trajectory& poses, const ViewEvaluationOptions& options) {
   if (models.empty()) throw core::Error("view evaluation: no model to render");
   ViewEvaluation evaluation;
   for (const ViewModel& model : models) evaluation.models.push_back(model.name);
@@ -163,7 +159,7 @@ ViewEvaluation evaluateViews(const std::vector<ViewModel>& models, core::FrameSo
     }
     if (result.status != core::ReadStatus::kFrame) continue;
     core::Frame& frame = result.frame;
-    const bool held_out = isHeldOut(frame.index, options.holdout_every);
+    const bool held_out = core::isHeldOut(frame.index, options.holdout_every);
     const std::size_t position = seen[held_out ? 1 : 0]++;
     if (position % (held_out ? held_out_stride : train_stride) != 0) continue;
     std::vector<core::Isometry> T_W_C;  // per model

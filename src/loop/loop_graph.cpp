@@ -260,8 +260,8 @@ MapCorrection LoopGraph::correction() const {
   return correction;
 }
 
-eval::Trajectory LoopGraph::correct(const eval::Trajectory& trajectory) const {
-  eval::Trajectory out;
+core::Trajectory LoopGraph::correct(const core::Trajectory& trajectory) const {
+  core::Trajectory out;
   std::size_t anchor = 0;
   for (const auto& [timestamp_ns, T_W_C] : trajectory) {
     while (anchor + 1 < keyframes_.size() && keyframes_[anchor + 1].timestamp_ns <= timestamp_ns) {

@@ -13,8 +13,6 @@
 namespace tessera::match {
 namespace {
 
-constexpr double kIdenticalPsnrDb = 99.0;
-
 // x wrapped into [0, period).
 double wrap(double x, double period) {
   const double r = std::fmod(x, period);

@@ -211,17 +211,22 @@ CandidateVerdict MatchCascade::tryCandidate(const TextureDescription& query,
   cv::Mat compared;
   cv::bitwise_and(query.mask, render.covered, compared);
   const double structure = structureAgreement(query.rgb, render.rgb, compared);
-  if (fidelity.coverage < config_.min_coverage) {
-    verdict.reason = fmt::format("covers {:.0f} % of the patch", 100.0 * fidelity.coverage);
-  } else if (fidelity.psnr_db < config_.min_psnr_db) {
-    verdict.reason = fmt::format("PSNR {:.1f} dB < {:.1f}", fidelity.psnr_db, config_.min_psnr_db);
-  } else if (structure < config_.ncc_min_score) {
+  verdict.reason = config_.refusal(fidelity);
+  if (verdict.reason.empty() && structure < config_.ncc_min_score) {
     verdict.reason = fmt::format("structure NCC {:.2f} < {:.2f}", structure, config_.ncc_min_score);
-  } else {
-    verdict.accepted = true;
-    verdict.reason.clear();
   }
+  verdict.accepted = verdict.reason.empty();
   return verdict;
+}
+
+std::string MatchConfig::refusal(const Fidelity& fidelity) const {
+  if (fidelity.coverage < min_coverage) {
+    return fmt::format("covers {:.0f} % of the patch", 100.0 * fidelity.coverage);
+  }
+  if (fidelity.psnr_db < min_psnr_db) {
+    return fmt::format("PSNR {:.1f} dB < {:.1f}", fidelity.psnr_db, min_psnr_db);
+  }
+  return {};
 }
 
 MatchDecision MatchCascade::match(const TextureDescription& query,

@@ -16,9 +16,9 @@
 #include "tessera/core/error.h"
 #include "tessera/db/texture_store.h"
 #include "tessera/map_export/map_files.h"
+#include "tessera/map_export/patch_files.h"
 #include "tessera/pipeline/flow_graph.h"
 #include "tessera/pipeline/texture_db_stages.h"
-#include "tessera/planes/patch_export.h"
 #include "tessera/texture/bitmap_export.h"
 
 namespace tessera::pipeline {
@@ -63,9 +63,8 @@ void removeDatabaseFiles(const std::filesystem::path& path) {
 // Gives each exported patch the database texture its newest instance names, writes each such
 // texture once (OUT/textures/texture_<id>.png), and fills the summary's economy figures.
 void bindMapTextures(const db::TextureStore& store, const CommitStage& commits,
-                     const StoreCatalog& catalog,
-                     const std::filesystem::path& out_dir, planes::TextureBindings& bindings,
-                     RunSummary& summary) {
+                     const reuse::StoreCatalog& catalog, const std::filesystem::path& out_dir,
+                     planes::TextureBindings& bindings, RunSummary& summary) {
   std::set<std::int64_t> used;
   // One layer as the map shows it; each database texture is written (and counted) once.
   const auto show = [&](const db::TextureInstance& instance, const match::StoredTexture& stored) {
@@ -163,10 +162,9 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
   db_options.journal = options.out_dir / "db_journal.sqlite";  // a server's database only
   const std::unique_ptr<db::TextureStore> store = db::openTextureStore(db_location, db_options);
   const std::int64_t run_id = store->beginRun(source.name());
-  const match::MatchCascade cascade(config.match);
-  StoreCatalog catalog(*store, config.match);
+  reuse::StoreCatalog catalog(*store, config.match);
   const DescribeStage describe_stage(texture_stage, config.match, config.pattern);
-  CommitStage commit_stage(*store, catalog, cascade, config.pattern, run_id);
+  CommitStage commit_stage(*store, catalog, {config.match, config.pattern, run_id});
 
   const auto start = std::chrono::steady_clock::now();
   runGraph(source_stage, tracking_stage, integration_stage, plane_stage, texture_stage,
@@ -206,7 +204,7 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
     summary.match_ms_p50 = commit_stage.matchTimer().medianMs();
   summary.wall_s = wall_s;
   summary.fps = wall_s > 0.0 ? static_cast<double>(summary.frames) / wall_s : 0.0;
-  summary.ate = eval::absoluteTrajectoryError(sink.estimate(), sink.groundTruth());
+  summary.ate = core::absoluteTrajectoryError(sink.estimate(), sink.groundTruth());
   if (loop_closer) {
     loop_closer->finish();
     const loop::LoopGraph& graph = loop_closer->graph();
@@ -217,9 +215,9 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
     summary.loop_planes_merged = plane_stage.planesMergedByLoops();
     summary.loop_instances_retired = commit_stage.retirements();
     summary.loop_wait_s = plane_stage.loopWaitS();
-    const eval::Trajectory closed = graph.correct(sink.estimate());
-    eval::writeTumTrajectory(closed, options.out_dir / "trajectory_closed.txt");
-    summary.ate_after_closure = eval::absoluteTrajectoryError(closed, sink.groundTruth());
+    const core::Trajectory closed = graph.correct(sink.estimate());
+    core::writeTumTrajectory(closed, options.out_dir / "trajectory_closed.txt");
+    summary.ate_after_closure = core::absoluteTrajectoryError(closed, sink.groundTruth());
     spdlog::info("loop closure: {} keyframes, {} loops closed, {} rejected, pose graph {:.0f} ms",
                  summary.loops.keyframes, summary.loops.loop_closures, summary.loops.rejected(),
                  summary.loops.pose_graph_ms);
@@ -267,14 +265,14 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
   if (texture_stage.areaBuiltM2() > 0.0) {
     summary.bitmap_ms_per_m2 = texture_stage.timer().totalMs() / texture_stage.areaBuiltM2();
   }
-  planes::writePatchesObj(patches, options.out_dir / "patches.obj", textures);
+  map_export::writePatchesObj(patches, options.out_dir / "patches.obj", textures);
   // The map users open: patches triangulated with their holes, one material per texture.
   const map_export::MapModel map_model =
       map_export::buildMapModel(patches, textures, options.residual ? &mesh : nullptr);
   map_export::writeMapObj(map_model, options.out_dir / "map.obj");
   map_export::writeMapGlb(map_model, options.out_dir, options.out_dir / "map.glb");
   summary.map_triangles = map_model.triangleCount();
-  planes::writePatchesJson(patches, options.out_dir / "patches.json", textures);
+  map_export::writePatchesJson(patches, options.out_dir / "patches.json", textures);
   summary.peak_rss_mb = peakRssMb();
   summary.rss_growth_mb_per_1000_frames = sink.rssGrowthMbPer1000Frames();
   writeReport(summary, options.out_dir / "report.json");

@@ -12,8 +12,7 @@
 #include "tessera/core/clock.h"
 #include "tessera/core/error.h"
 #include "tessera/core/registration.h"
-#include "tessera/eval/trajectory.h"
-#include "tessera/eval/view_evaluation.h"
+#include "tessera/core/trajectory.h"
 #include "tessera/pipeline/texture_db_stages.h"
 #include "tessera/texture/bitmap_export.h"
 
@@ -172,7 +171,7 @@ FusedFrame IntegrationStage::process(TrackedFrame tracked) {
     fused.frame = std::move(tracked.frame);
     return fused;
   }
-  if (eval::isHeldOut(tracked.frame.index, holdout_every_)) {
+  if (core::isHeldOut(tracked.frame.index, holdout_every_)) {
     // Posed (the trajectory keeps it, for the view evaluation) but not part of the map.
     fused.held_out = true;
     if (fused.T_W_C) fused.skip_reason = "held out for evaluation (--holdout-every)";
@@ -504,7 +503,7 @@ void StatsSink::process(const FusedFrame& fused) {
     }
     stats_ << line.dump() << '\n';
     writePatchEvents(fused.patch_events);
-    if (pose) trajectory_ << eval::tumLine(fused.frame.timestamp_ns, *pose);
+    if (pose) trajectory_ << core::tumLine(fused.frame.timestamp_ns, *pose);
     if (!stats_ || !trajectory_) {
       write_failed_ = true;
       spdlog::error("{}: writing failed (disk full?); no further stats lines",

@@ -29,7 +29,7 @@ json wallAndPosterTruth() {
               {"planes", {plane("wall", 2.0, 2.0, 1.6), plane("poster", 1.995, 0.6, 0.8)}}};
 }
 
-Trajectory onePose() { return {{0, core::Isometry::Identity()}}; }
+core::Trajectory onePose() { return {{0, core::Isometry::Identity()}}; }
 
 // A patch on the plane z = z_m covering [u0, u1] x [v0, v1] in world x, y.
 json patch(int id, double z_m, double u0, double u1, double v0, double v1) {

@@ -131,7 +131,7 @@ TextureEvaluationOptions centreSampling() {
   return options;
 }
 
-const Trajectory kAbove = {{0, core::Isometry(Eigen::Translation3d(1.0, 1.0, 1.5))}};
+const core::Trajectory kAbove = {{0, core::Isometry(Eigen::Translation3d(1.0, 1.0, 1.5))}};
 
 TEST(TextureEvaluation, AFaithfulBitmapScoresHighAndTheTsdfBaselineIsOptional) {
   const fs::path run = test::freshTempDir();

@@ -5,15 +5,15 @@
 
 #include "support/test_data.h"
 #include "tessera/core/error.h"
+#include "tessera/core/trajectory.h"
 #include "tessera/eval/run_evaluation.h"
-#include "tessera/eval/trajectory.h"
 
 namespace tessera::eval {
 namespace {
 
 // A wavy ground-truth path at 30 Hz.
-Trajectory groundTruth(int poses) {
-  Trajectory gt;
+core::Trajectory groundTruth(int poses) {
+  core::Trajectory gt;
   for (int i = 0; i < poses; ++i) {
     const double a = 0.05 * i;
     gt[1'000'000'000LL + i * 33'333'333LL] = core::isometryFromTranslationQuaternion(
@@ -23,15 +23,15 @@ Trajectory groundTruth(int poses) {
 }
 
 TEST(Ate, IsZeroForTheTruthSeenFromAnotherFrame) {
-  const Trajectory gt = groundTruth(100);
+  const core::Trajectory gt = groundTruth(100);
   // The same path expressed in a frame rotated and shifted: alignment removes it exactly.
   core::Isometry T_other_gt = core::Isometry::Identity();
   T_other_gt.linear() =
       Eigen::AngleAxisd(0.7, Eigen::Vector3d(1, 2, 3).normalized()).toRotationMatrix();
   T_other_gt.translation() = Eigen::Vector3d(5, -2, 1);
-  Trajectory estimate;
+  core::Trajectory estimate;
   for (const auto& [t, pose] : gt) estimate[t + 3'000'000] = T_other_gt * pose;  // 3 ms late
-  const auto ate = absoluteTrajectoryError(estimate, gt);
+  const auto ate = core::absoluteTrajectoryError(estimate, gt);
   ASSERT_TRUE(ate.has_value());
   EXPECT_EQ(ate->pairs, 100u);
   EXPECT_LT(ate->rmse_m, 1e-9);
@@ -39,10 +39,10 @@ TEST(Ate, IsZeroForTheTruthSeenFromAnotherFrame) {
 }
 
 TEST(Ate, EqualsTheRmsOfKnownPositionErrors) {
-  const Trajectory gt = groundTruth(400);
+  const core::Trajectory gt = groundTruth(400);
   std::mt19937 rng(5);
   std::uniform_real_distribution<double> angle(0.0, 2 * M_PI);
-  Trajectory estimate;
+  core::Trajectory estimate;
   for (const auto& [t, pose] : gt) {
     // Each position off by exactly 2 cm in a random horizontal direction: RMSE 2 cm before
     // alignment; alignment can only lower it slightly.
@@ -51,17 +51,17 @@ TEST(Ate, EqualsTheRmsOfKnownPositionErrors) {
     moved.translation() += 0.02 * Eigen::Vector3d(std::cos(a), std::sin(a), 0.0);
     estimate[t] = moved;
   }
-  const auto ate = absoluteTrajectoryError(estimate, gt);
+  const auto ate = core::absoluteTrajectoryError(estimate, gt);
   ASSERT_TRUE(ate.has_value());
   EXPECT_NEAR(ate->rmse_m, 0.02, 0.002);
   EXPECT_LE(ate->max_m, 0.025);
 }
 
 TEST(Ate, NeedsThreeMatchedPoses) {
-  const Trajectory gt = groundTruth(10);
-  Trajectory far_off;
+  const core::Trajectory gt = groundTruth(10);
+  core::Trajectory far_off;
   for (const auto& [t, pose] : gt) far_off[t + 500'000'000] = pose;  // nothing within 20 ms
-  EXPECT_FALSE(absoluteTrajectoryError(far_off, gt).has_value());
+  EXPECT_FALSE(core::absoluteTrajectoryError(far_off, gt).has_value());
 }
 
 TEST(EvaluateRun, FillsAteIntoTheReportAndNamesMissingFiles) {
@@ -84,7 +84,7 @@ TEST(EvaluateRun, FillsAteIntoTheReportAndNamesMissingFiles) {
   EXPECT_NEAR(report["ate_m"].get<double>(), 0.0, 1e-9);
   EXPECT_TRUE(report["plane_recall"].is_null());
   // The estimate aligned to the ground truth, in TUM format, reads back with the same poses.
-  const Trajectory aligned = readTumTrajectory(dir / "trajectory_aligned.txt");
+  const core::Trajectory aligned = core::readTumTrajectory(dir / "trajectory_aligned.txt");
   ASSERT_EQ(aligned.size(), 3u);
   EXPECT_NEAR(aligned.rbegin()->second.translation().y(), 0.1, 1e-6);
 

@@ -93,7 +93,7 @@ class VectorSource : public core::FrameSource {
 
 struct WallViews {
   std::vector<core::Frame> frames;
-  Trajectory poses;
+  core::Trajectory poses;
 };
 
 WallViews wallViews() {

@@ -5,8 +5,8 @@
 #include "support/synthetic_office.h"
 #include "support/test_data.h"
 #include "tessera/core/registration.h"
+#include "tessera/core/trajectory.h"
 #include "tessera/drivers/dataset_source.h"
-#include "tessera/eval/trajectory.h"
 #include "tessera/fusion/tracker.h"
 #include "tessera/planes/plane_detector.h"
 
@@ -237,7 +237,7 @@ TEST(Tracker, TracksTheRealDiningRoomKeyframesWithinTenCentimetres) {
   options.intrinsics = core::parseIntrinsicsSpec("518.0,519.0,325.5,253.5");
   drivers::DatasetSource source(test::sharedData() / "rgbd/kinect_diningroom_5", options);
   Tracker tracker(TrackerConfig{});
-  eval::Trajectory estimate, truth;
+  core::Trajectory estimate, truth;
   std::optional<core::Isometry> first;
   for (core::ReadResult read = source.read(); read.status != core::ReadStatus::kEndOfData;
        read = source.read()) {
@@ -250,7 +250,7 @@ TEST(Tracker, TracksTheRealDiningRoomKeyframesWithinTenCentimetres) {
     estimate[frame.timestamp_ns] = result.T_W_C;
     truth[frame.timestamp_ns] = *frame.T_W_C_gt;
   }
-  const auto ate = eval::absoluteTrajectoryError(estimate, truth);
+  const auto ate = core::absoluteTrajectoryError(estimate, truth);
   ASSERT_TRUE(ate.has_value());
   EXPECT_EQ(ate->pairs, 5u);
   EXPECT_LT(ate->rmse_m, 0.10);  // 31 mm measured

@@ -15,8 +15,8 @@
 
 #include "support/synthetic_plane.h"
 #include "support/test_data.h"
+#include "tessera/core/trajectory.h"
 #include "tessera/drivers/oni/oni_source.h"
-#include "tessera/eval/trajectory.h"
 #include "tessera/eval/view_render.h"
 #include "tessera/map_export/map_model.h"
 #include "tessera/pipeline/run.h"
@@ -137,7 +137,7 @@ TEST(MapExport, ARealSequenceMapLoadsBackInBothFormats) {
   ASSERT_GT(drawn(from_obj), 0);
   ASSERT_EQ(drawn(from_glb), drawn(from_obj));
   ASSERT_EQ(from_glb.textures.size(), from_obj.textures.size());
-  const eval::Trajectory poses = eval::readTumTrajectory(out / "trajectory.txt");
+  const core::Trajectory poses = core::readTumTrajectory(out / "trajectory.txt");
   ASSERT_GE(poses.size(), 3u);
   for (const auto& at :
        {poses.begin(), std::next(poses.begin(), static_cast<long>(poses.size() / 2)),

@@ -382,7 +382,7 @@ TEST(StoreCatalog, KeepsTexturesWithinItsBudgetAndReadsEvictedOnesBack) {
   ASSERT_EQ(ids.size(), 3u);
   match::MatchConfig config;
   config.catalog_cache_mb = 0.35;  // about two of these textures (200 x 200 x 4 bytes each)
-  const StoreCatalog catalog(*store, config);
+  const reuse::StoreCatalog catalog(*store, config);
   EXPECT_EQ(catalog.size(), 3u);
   const auto first = catalog.load(ids[0]);
   ASSERT_TRUE(first);

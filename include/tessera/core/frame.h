@@ -34,4 +34,11 @@ struct Frame {
   bool source_interrupted = false;
 };
 
+// Whether frame `index` is left out of fusion and texturing by `tessera run --holdout-every N`
+// (every N-th frame: N-1, 2N-1, ...; the first frame always builds the map), to be scored
+// apart by `tessera eval --frames`. 0 or 1: none.
+inline bool isHeldOut(std::uint64_t index, int holdout_every) {
+  return holdout_every > 1 && (index + 1) % static_cast<std::uint64_t>(holdout_every) == 0;
+}
+
 }  // namespace tessera::core

@@ -8,7 +8,7 @@
 #include <nlohmann/json.hpp>
 
 #include "tessera/core/pose.h"
-#include "tessera/eval/trajectory.h"
+#include "tessera/core/trajectory.h"
 
 namespace tessera::eval {
 
@@ -57,7 +57,7 @@ struct PlaneEvaluation {
 // the run's world frame onto the truth's (the trajectory alignment). Overlay planes (a poster lying
 // on a wall, within the offset bound) count as part of the plane they lie on. Throws core::Error
 // when a file lacks what is needed.
-PlaneEvaluation evaluatePlanes(const nlohmann::json& truth, const Trajectory& truth_poses,
+PlaneEvaluation evaluatePlanes(const nlohmann::json& truth, const core::Trajectory& truth_poses,
                                const nlohmann::json& patches, const core::Isometry& T_gt_est,
                                const PlaneEvaluationOptions& options = {});
 

@@ -12,7 +12,7 @@
 #include <nlohmann/json.hpp>
 
 #include "tessera/core/pose.h"
-#include "tessera/eval/trajectory.h"
+#include "tessera/core/trajectory.h"
 
 namespace tessera::fusion {
 class MeshColourSampler;
@@ -95,12 +95,10 @@ struct TextureEvaluation {
 // missed match when an earlier-stored texture of the run (a lower texture id, stored by a patch)
 // came from the same true texture. Throws core::Error naming what is missing (a ground truth
 // written before it held texture definitions, an unreadable image).
-TextureEvaluation evaluateTextures(const nlohmann::json& truth,
-                                   const std::filesystem::path& truth_dir,
-                                   const Trajectory& truth_poses, const nlohmann::json& patches,
-                                   const std::filesystem::path& run_dir,
-                                   const core::Isometry& T_gt_est,
-                                   const fusion::MeshColourSampler* baseline,
-                                   const TextureEvaluationOptions& options = {});
+TextureEvaluation evaluateTextures(
+    const nlohmann::json& truth, const std::filesystem::path& truth_dir,
+    const core::Trajectory& truth_poses, const nlohmann::json& patches,
+    const std::filesystem::path& run_dir, const core::Isometry& T_gt_est,
+    const fusion::MeshColourSampler* baseline, const TextureEvaluationOptions& options = {});
 
 }  // namespace tessera::eval

@@ -13,21 +13,17 @@
 #include <nlohmann/json.hpp>
 
 #include "tessera/core/frame_source.h"
-#include "tessera/eval/trajectory.h"
+#include "tessera/core/trajectory.h"
 #include "tessera/eval/view_render.h"
 
 namespace tessera::eval {
-
-// Whether frame `index` is left out of fusion and texturing by `tessera run --holdout-every N`
-// (every N-th frame: N-1, 2N-1, ...; the first frame always builds the map). 0: none.
-bool isHeldOut(std::uint64_t index, int holdout_every);
 
 struct ViewModel {
   std::string name;
   const RenderMesh* mesh = nullptr;
   // The poses of the frame the mesh lies in, when not the shared ones (after a loop closure
   // the patch map lies in the corrected frame, the TSDF mesh in the tracked one).
-  const Trajectory* poses = nullptr;
+  const core::Trajectory* poses = nullptr;
 };
 
 struct ViewEvaluationOptions {
@@ -73,7 +69,7 @@ struct ViewEvaluation {
 // are skipped. `progress`, when given, is called after each view scored. Throws core::Error
 // when no model is given or the source fails.
 ViewEvaluation evaluateViews(const std::vector<ViewModel>& models, core::FrameSource& frames,
-                             const Trajectory& poses, const ViewEvaluationOptions& options);
+                             const core::Trajectory& poses, const ViewEvaluationOptions& options);
 
 // The report.json keys of docs/METRICS.md for a run evaluated as {patches, mesh}:
 // view_psnr_mean, view_psnr_baseline_mean, view_psnr_holdout_mean,

@@ -14,7 +14,7 @@
 #include <string>
 #include <vector>
 
-#include "tessera/eval/trajectory.h"
+#include "tessera/core/trajectory.h"
 #include "tessera/fusion/tracker.h"
 #include "tessera/loop/loop_config.h"
 #include "tessera/loop/map_correction.h"
@@ -66,7 +66,7 @@ class LoopGraph {
 
   // `trajectory` (tracked poses) moved with the corrections of their keyframes: each pose
   // follows the last keyframe taken at or before it.
-  eval::Trajectory correct(const eval::Trajectory& trajectory) const;
+  core::Trajectory correct(const core::Trajectory& trajectory) const;
 
   // Each keyframe's motion from its tracked pose to its pose after the last optimisation.
   MapCorrection correction() const;

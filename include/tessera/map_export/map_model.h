@@ -11,8 +11,8 @@
 #include <Eigen/Core>
 
 #include "tessera/fusion/tsdf_map.h"
-#include "tessera/planes/patch_export.h"
 #include "tessera/planes/patch_map.h"
+#include "tessera/planes/texture_binding.h"
 
 namespace tessera::map_export {
 
@@ -46,7 +46,7 @@ struct ResidualOptions {
   double plane_distance_m = 0.02;
 };
 
-// The finalized patches with the textures `textures` binds to them (planes::writePatchesObj's
+// The finalized patches with the textures `textures` binds to them (map_export::writePatchesObj's
 // bindings), their overlays, and, when `residual` is given, the part of that surface no patch
 // covers as the object "residual".
 MapModel buildMapModel(const planes::PatchMap& map, const planes::TextureBindings& textures,

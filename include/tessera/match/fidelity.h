@@ -28,6 +28,9 @@ Rendered renderThrough(const cv::Mat& texture, const cv::Mat& texture_mask,
 Rendered renderPattern(const cv::Mat& tile, const cv::Mat& tile_mask, const core::Lattice2& lattice,
                        const core::Similarity2& patch_to_frame, int width, int height);
 
+// The PSNR of identical pixels (a finite stand-in for infinity).
+inline constexpr double kIdenticalPsnrDb = 99.0;
+
 struct Fidelity {
   double psnr_db = 0.0;    // over the patch mask texels the texture covers (99 when identical)
   double coverage = 0.0;   // covered mask texels / mask texels

@@ -41,6 +41,12 @@ struct MatchConfig {
   // (they are read back from the database when needed again): memory stays bounded as the
   // database grows.
   double catalog_cache_mb = 256.0;
+
+  // The one rule for showing a patch through pixels other than its own (a reuse, a pattern, a
+  // base with overlays): at least min_psnr_db over at least min_coverage of its mask.
+  bool accepts(const Fidelity& fidelity) const { return refusal(fidelity).empty(); }
+  // Why `fidelity` falls short of that rule, or "" when it does not.
+  std::string refusal(const Fidelity& fidelity) const;
 };
 
 // A bitmap as the cascade sees it, computed once per new bitmap (and stored with a texture).

@@ -9,8 +9,8 @@
 #include <nlohmann/json.hpp>
 
 #include "tessera/core/frame_source.h"
+#include "tessera/core/trajectory.h"
 #include "tessera/db/texture_store.h"
-#include "tessera/eval/trajectory.h"
 #include "tessera/loop/loop_graph.h"
 #include "tessera/pipeline/run_config.h"
 #include "tessera/pipeline/stages.h"
@@ -107,7 +107,7 @@ struct RunSummary {
   std::optional<double> db_commit_ms_p50, db_commit_ms_p95;
   std::optional<double> match_ms_p50;
   // ATE of the fused poses against the recording's ground truth, when it has one.
-  std::optional<eval::AteResult> ate;
+  std::optional<core::AteResult> ate;
   // Loop closure (tracked poses only): what it found, and the ATE of the corrected trajectory
   // (OUT/trajectory_closed.txt), in whose frame the patch map ends; `ate` stays that of the
   // poses before loop closure (OUT/trajectory.txt), at which the TSDF was fused.
@@ -118,7 +118,7 @@ struct RunSummary {
   std::size_t loop_corrections_followed = 0, loop_planes_moved = 0, loop_planes_merged = 0;
   std::size_t loop_instances_retired = 0;
   double loop_wait_s = 0.0;  // the end of the stream waiting for loop closure (in wall_s)
-  std::optional<eval::AteResult> ate_after_closure;
+  std::optional<core::AteResult> ate_after_closure;
   std::vector<StageFigures> stages;
 };
 

@@ -15,17 +15,17 @@
 #include <string>
 
 #include "tessera/core/frame_source.h"
-#include "tessera/eval/trajectory.h"
+#include "tessera/core/trajectory.h"
 #include "tessera/fusion/tracker.h"
 #include "tessera/fusion/tsdf_map.h"
 #include "tessera/loop/loop_closer.h"
 #include "tessera/pipeline/map_monitor.h"
 #include "tessera/pipeline/stage_timer.h"
 #include "tessera/planes/frame_sharpness.h"
-#include "tessera/planes/patch_export.h"
 #include "tessera/planes/patch_map.h"
 #include "tessera/planes/plane_alignment.h"
 #include "tessera/planes/plane_detector.h"
+#include "tessera/planes/texture_binding.h"
 #include "tessera/texture/bitmap_builder.h"
 
 namespace tessera::pipeline {
@@ -150,7 +150,7 @@ class TrackingStage {
 // Runs beside the tracking stage: frame N is integrated while frame N+1 is tracked.
 class IntegrationStage {
  public:
-  // Every holdout_every-th frame (eval::isHeldOut) is posed but neither fused nor textured, so
+  // Every holdout_every-th frame (core::isHeldOut) is posed but neither fused nor textured, so
   // that `tessera eval` can score views the map was not built from (0: none).
   IntegrationStage(const fusion::TsdfConfig& tsdf, int thread_cap, int holdout_every = 0);
 
@@ -321,8 +321,8 @@ class StatsSink {
   std::size_t framesDone() const { return frames_done_; }
   std::size_t mapBytes() const { return map_bytes_; }
   // The poses frames were fused at, and the recording's ground truth for the same frames.
-  const eval::Trajectory& estimate() const { return estimate_; }
-  const eval::Trajectory& groundTruth() const { return ground_truth_; }
+  const core::Trajectory& estimate() const { return estimate_; }
+  const core::Trajectory& groundTruth() const { return ground_truth_; }
   // Capture-to-fusion latency of each frame of a live source, ms, in arrival order.
   const std::vector<double>& latenciesMs() const { return latencies_ms_; }
   std::size_t interruptions() const { return interruptions_; }
@@ -344,8 +344,8 @@ class StatsSink {
   std::chrono::steady_clock::time_point start_;
   std::size_t frames_done_ = 0;
   std::size_t map_bytes_ = 0;
-  eval::Trajectory estimate_;
-  eval::Trajectory ground_truth_;
+  core::Trajectory estimate_;
+  core::Trajectory ground_truth_;
   std::vector<double> latencies_ms_;
   std::vector<double> rss_mb_;  // resident memory after each frame
   std::size_t interruptions_ = 0;

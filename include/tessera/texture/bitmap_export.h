@@ -4,7 +4,7 @@
 #include <filesystem>
 #include <map>
 
-#include "tessera/planes/patch_export.h"
+#include "tessera/planes/texture_binding.h"
 #include "tessera/texture/bitmap_builder.h"
 
 namespace tessera::texture {

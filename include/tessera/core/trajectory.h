@@ -11,7 +11,7 @@
 
 #include "tessera/core/pose.h"
 
-namespace tessera::eval {
+namespace tessera::core {
 
 using Trajectory = std::map<std::int64_t, core::Isometry>;  // timestamp ns -> T_W_C
 
@@ -38,4 +38,4 @@ std::optional<AteResult> absoluteTrajectoryError(const Trajectory& estimate,
                                                  const Trajectory& ground_truth,
                                                  std::int64_t max_dt_ns = 20'000'000);
 
-}  // namespace tessera::eval
+}  // namespace tessera::core

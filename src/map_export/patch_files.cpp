@@ -1,4 +1,4 @@
-#include "tessera/planes/patch_export.h"
+#include "tessera/map_export/patch_files.h"
 
 #include <algorithm>
 #include <array>
@@ -11,7 +11,17 @@
 #include "tessera/core/error.h"
 #include "tessera/core/output_file.h"
 
-namespace tessera::planes {
+namespace tessera::map_export {
+
+using planes::MapTexture;
+using planes::Outline;
+using planes::OutlinePart;
+using planes::OverlayQuad;
+using planes::Patch;
+using planes::PatchMap;
+using planes::Polygon2;
+using planes::TextureBinding;
+using planes::TextureBindings;
 
 namespace {
 
@@ -26,69 +36,20 @@ nlohmann::json vectorJson(const Eigen::Vector2d& v) { return {v.x(), v.y()}; }
 
 }  // namespace
 
-const TextureBinding* currentTexture(const Patch& patch, const TextureBindings& textures) {
-  const auto it = textures.find(patch.id);
-  return it != textures.end() && it->second.version == patch.version ? &it->second : nullptr;
-}
-
-Eigen::Vector2d textureCoordinates(const TextureBinding& texture, double u, double v, bool clamp) {
-  const Eigen::Vector2d d = Eigen::Vector2d(u, v) - texture.origin_uv;
-  if (const auto& shown = texture.map_texture) {
-    // Pixel-centre coordinates on the patch's grid, through the instance, back to corners.
-    const Eigen::Vector2d texel(d.dot(texture.x_axis) / texture.texel_m - 0.5,
-                                d.dot(texture.y_axis) / texture.texel_m - 0.5);
-    const Eigen::Vector2d frame = shown->transform.apply(texel);
-    if (shown->lattice) {  // lattice coordinates: the image spans one cell, [0, 1) each way
-      const Eigen::Vector2d c = shown->lattice->coordinatesOf(frame);
-      return {c.x() + 0.5 / shown->width, 1.0 - (c.y() + 0.5 / shown->height)};
-    }
-    const Eigen::Vector2d q = frame + Eigen::Vector2d(0.5, 0.5);
-    const double s = q.x() / shown->width, t = 1.0 - q.y() / shown->height;
-    if (shown->tiled || !clamp) return {s, t};
-    return {std::clamp(s, 0.0, 1.0), std::clamp(t, 0.0, 1.0)};
-  }
-  const double s = d.dot(texture.x_axis) / texture.texel_m / texture.width;
-  const double t = 1.0 - d.dot(texture.y_axis) / texture.texel_m / texture.height;
-  if (!clamp) return {s, t};
-  return {std::clamp(s, 0.0, 1.0), std::clamp(t, 0.0, 1.0)};
-}
-
-OverlayQuad overlayQuad(const TextureBinding& texture, const MapTexture& overlay) {
-  const core::Similarity2 texture_to_patch = overlay.transform.inverse();
-  const double w = overlay.width, h = overlay.height;
-  // Texture pixel corners, and their OBJ texture coordinates (t up).
-  const std::array<Eigen::Vector2d, 4> corners{
-      Eigen::Vector2d(-0.5, -0.5), {w - 0.5, -0.5}, {w - 0.5, h - 0.5}, {-0.5, h - 0.5}};
-  OverlayQuad quad;
-  quad.st = {Eigen::Vector2d(0, 1), {1, 1}, {1, 0}, {0, 0}};
-  for (std::size_t i = 0; i < 4; ++i) {
-    const Eigen::Vector2d texel = texture_to_patch.apply(corners[i]) + Eigen::Vector2d(0.5, 0.5);
-    quad.uv[i] = texture.origin_uv +
-                 texture.texel_m * (texel.x() * texture.x_axis + texel.y() * texture.y_axis);
-  }
-  // Clockwise in (u, v), as the patch's faces: the face's normal is -n.
-  const Eigen::Vector2d a = quad.uv[1] - quad.uv[0], b = quad.uv[3] - quad.uv[0];
-  if (a.x() * b.y() - a.y() * b.x() > 0.0) {
-    std::swap(quad.uv[1], quad.uv[3]);
-    std::swap(quad.st[1], quad.st[3]);
-  }
-  return quad;
-}
-
 namespace {
 
 // An overlay as its own object: the quad its texture's rectangle covers on the patch, lifted
-// kOverlayLift_m towards the side the camera saw (-n) so that it is drawn over the pattern.
+// planes::kOverlayLift_m towards the side the camera saw (-n) so that it is drawn over the pattern.
 // Returns the vertex count after it.
 std::size_t writeOverlay(std::ofstream& out, const Patch& patch, const Patch::Frame& frame,
                          const TextureBinding& texture, const MapTexture& overlay,
                          std::size_t layer, std::size_t vertices) {
-  const OverlayQuad quad = overlayQuad(texture, overlay);
+  const OverlayQuad quad = planes::overlayQuad(texture, overlay);
   out << fmt::format("o patch_{}_v{}_overlay_{}\nusemtl texture_{}\n", patch.id, patch.version,
                      layer, overlay.texture_id);
   for (std::size_t i = 0; i < 4; ++i) {
     const Eigen::Vector3d X =
-        frame.at(quad.uv[i].x(), quad.uv[i].y()) - kOverlayLift_m * patch.normal;
+        frame.at(quad.uv[i].x(), quad.uv[i].y()) - planes::kOverlayLift_m * patch.normal;
     out << fmt::format("v {:.4f} {:.4f} {:.4f}\nvt {:.5f} {:.5f}\n", X.x(), X.y(), X.z(),
                        quad.st[i].x(), quad.st[i].y());
   }
@@ -111,7 +72,8 @@ void writeMaterials(const PatchMap& map, const TextureBindings& textures,
   out << "newmtl untextured\nKa 1 1 1\nKd 0.7 0.7 0.7\nKs 0 0 0\nillum 1\n\n";
   std::set<std::int64_t> written;
   for (const Patch& patch : map.patches()) {
-    const TextureBinding* texture = patch.finalized ? currentTexture(patch, textures) : nullptr;
+    const TextureBinding* texture =
+        patch.finalized ? planes::currentTexture(patch, textures) : nullptr;
     if (texture == nullptr) continue;
     if (texture->map_texture) {
       std::vector<const MapTexture*> layers{&*texture->map_texture};
@@ -151,7 +113,7 @@ void writePatchesObj(const PatchMap& map, const std::filesystem::path& path,
     if (!patch.finalized) continue;
     const Outline outline = map.outlineOf(patch);
     const Patch::Frame frame = patch.planeFrame();
-    const TextureBinding* texture = currentTexture(patch, textures);
+    const TextureBinding* texture = planes::currentTexture(patch, textures);
     out << fmt::format("o patch_{}_v{}\n", patch.id, patch.version);
     out << "usemtl " << (texture != nullptr ? materialOf(patch, *texture) : "untextured") << '\n';
     // Every vertex gets a texture coordinate (0, 0 on untextured patches), so that vertex and
@@ -159,7 +121,7 @@ void writePatchesObj(const PatchMap& map, const std::filesystem::path& path,
     auto vertex = [&](double u, double v) {
       const Eigen::Vector3d X = frame.at(u, v);
       const Eigen::Vector2d st =
-          texture != nullptr ? textureCoordinates(*texture, u, v) : Eigen::Vector2d::Zero();
+          texture != nullptr ? planes::textureCoordinates(*texture, u, v) : Eigen::Vector2d::Zero();
       out << fmt::format("v {:.4f} {:.4f} {:.4f}\nvt {:.5f} {:.5f}\n", X.x(), X.y(), X.z(), st.x(),
                          st.y());
       return ++vertices;
@@ -216,7 +178,7 @@ void writePatchesJson(const PatchMap& map, const std::filesystem::path& path,
       parts.push_back({{"outer", polygonJson(part.outer)}, {"holes", holes}});
     }
     nlohmann::json texture_json = nullptr;
-    if (const TextureBinding* texture = currentTexture(patch, textures)) {
+    if (const TextureBinding* texture = planes::currentTexture(patch, textures)) {
       texture_json = {{"image", texture->image},
                       {"state_image", texture->state_image},
                       {"texel_m", texture->texel_m},
@@ -229,7 +191,7 @@ void writePatchesJson(const PatchMap& map, const std::filesystem::path& path,
                       {"inpainted", texture->inpainted}};
     }
     nlohmann::json instance_json = nullptr;
-    if (const TextureBinding* texture = currentTexture(patch, textures);
+    if (const TextureBinding* texture = planes::currentTexture(patch, textures);
         texture != nullptr && texture->map_texture) {
       const MapTexture& shown = *texture->map_texture;
       const core::Similarity2& s = shown.transform;
@@ -283,4 +245,4 @@ void writePatchesJson(const PatchMap& map, const std::filesystem::path& path,
   core::finishOutputFile(out, path);
 }
 
-}  // namespace tessera::planes
+}  // namespace tessera::map_export

@@ -1,8 +1,5 @@
-// Layers for a bitmap that matched nothing, kept when they show it as faithfully as a reuse.
-// Its base is a periodic pattern (new, or a stored one aligned through the two lattices), or a
-// stored texture the cascade placed but could not accept because some regions differ (a
-// blackboard on one wall, posters on the other). Regions the base does not explain become
-// overlays, matched against the database like any bitmap.
+#include "tessera/reuse/layer_plan.h"
+
 #include <algorithm>
 
 #include <spdlog/spdlog.h>
@@ -11,9 +8,8 @@
 
 #include "tessera/match/pattern_alignment.h"
 #include "tessera/pattern/overlays.h"
-#include "tessera/pipeline/texture_db_stages.h"
 
-namespace tessera::pipeline {
+namespace tessera::reuse {
 
 namespace {
 
@@ -65,7 +61,7 @@ std::optional<match::CandidateVerdict> reuseStoredPattern(
         match::renderStored(stored, *verdict.transform, shown.rgb.cols, shown.rgb.rows));
     verdict.psnr_db = fidelity.psnr_db;
     verdict.coverage = fidelity.coverage;
-    if (fidelity.psnr_db >= config.min_psnr_db && fidelity.coverage >= config.min_coverage) {
+    if (config.accepts(fidelity)) {
       verdict.accepted = true;
       return verdict;
     }
@@ -195,18 +191,12 @@ std::optional<LayerPlan> LayerPlanner::planPartialReuse(
 std::optional<LayerPlan> LayerPlanner::judged(const match::TextureDescription& bitmap,
                                               LayerPlan plan) const {
   plan.fidelity = layeredFidelity(bitmap, plan, catalog_);
-  const match::MatchConfig& limits = cascade_.config();
-  if (plan.fidelity.psnr_db >= limits.min_psnr_db &&
-      plan.fidelity.coverage >= limits.min_coverage) {
-    return plan;
-  }
-  spdlog::debug(
-      "{} with {} overlays shows a {}x{} bitmap at {:.1f} dB over {:.0f} % of it, short of a "
-      "reuse's {:.1f} dB over {:.0f} %: stored whole",
-      plan.base_reuse ? fmt::format("texture {}", plan.base_reuse->id) : "a new pattern",
-      plan.overlays.size(), bitmap.rgb.cols, bitmap.rgb.rows, plan.fidelity.psnr_db,
-      100.0 * plan.fidelity.coverage, limits.min_psnr_db, 100.0 * limits.min_coverage);
+  const std::string refusal = cascade_.config().refusal(plan.fidelity);
+  if (refusal.empty()) return plan;
+  spdlog::debug("{} with {} overlays shows a {}x{} bitmap short of a reuse ({}): stored whole",
+                plan.base_reuse ? fmt::format("texture {}", plan.base_reuse->id) : "a new pattern",
+                plan.overlays.size(), bitmap.rgb.cols, bitmap.rgb.rows, refusal);
   return std::nullopt;
 }
 
-}  // namespace tessera::pipeline
+}  // namespace tessera::reuse

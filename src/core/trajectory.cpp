@@ -1,4 +1,4 @@
-#include "tessera/eval/trajectory.h"
+#include "tessera/core/trajectory.h"
 
 #include <cmath>
 #include <fstream>
@@ -9,7 +9,7 @@
 
 #include "tessera/core/error.h"
 
-namespace tessera::eval {
+namespace tessera::core {
 
 Trajectory readTumTrajectory(const std::filesystem::path& path) {
   std::ifstream in(path);
@@ -83,4 +83,4 @@ std::optional<AteResult> absoluteTrajectoryError(const Trajectory& estimate,
   return result;
 }
 
-}  // namespace tessera::eval
+}  // namespace tessera::core

@@ -1,0 +1,89 @@
+#pragma once
+// Layers for a bitmap that matched nothing whole. Its base is a periodic pattern (new, or a
+// stored one aligned through the two lattices) or a stored texture the cascade placed but
+// refused because some regions differ (a blackboard on one wall, posters on the other).
+// Regions the base does not explain become overlays, matched against the catalog like any
+// bitmap. A plan is kept only when all its layers together pass MatchConfig::accepts.
+#include <optional>
+#include <vector>
+
+#include <opencv2/core/types.hpp>
+
+#include "tessera/core/similarity2.h"
+#include "tessera/match/match_cascade.h"
+#include "tessera/pattern/pattern_config.h"
+
+namespace tessera::reuse {
+
+// A region of a bitmap that its base layer does not explain (a poster on a brick wall), drawn
+// on top of the base from a texture it reuses, or from its own crop.
+struct OverlayMatch {
+  cv::Rect box;                           // in bitmap texels
+  match::TextureDescription description;  // the crop, with the bitmap's mask
+  // The crop as stored: its empty texels inpainted, so that the overlay hides the base over
+  // its whole box (the base would show another surface through them).
+  cv::Mat opaque_rgb;
+  match::MatchDecision decision;  // the crop's texel -> a stored texture, if any
+};
+
+struct LayerPlan {
+  std::optional<pattern::Pattern> found;  // a new pattern, in bitmap texels
+  // The bitmap without its overlay regions (when there are some), and a stored texture that
+  // shows it (then reused instead of the new pattern; always there without one).
+  std::optional<match::TextureDescription> base;
+  std::optional<match::CandidateVerdict> base_reuse;
+  std::vector<OverlayMatch> overlays;
+  match::Fidelity fidelity;  // of all layers together, over the whole bitmap
+};
+
+// Plans a bitmap's layers against a catalog as it is.
+class LayerPlanner {
+ public:
+  LayerPlanner(const match::MatchCascade& cascade, const match::TextureCatalog& catalog,
+               const pattern::PatternStageConfig& patterns)
+      : cascade_(cascade), catalog_(catalog), patterns_(patterns) {}
+
+  // A periodic pattern found in the bitmap: its base (a stored pattern the explained part
+  // reuses, else the new tile) and its overlays.
+  std::optional<LayerPlan> planPattern(const match::TextureDescription& bitmap,
+                                       pattern::Pattern found) const;
+  // The candidate that covers most of the bitmap, best first among `verdicts` (placed but
+  // refused for fidelity), as the base, and what it does not explain as overlays.
+  std::optional<LayerPlan> planPartialReuse(
+      const match::TextureDescription& bitmap,
+      const std::vector<match::CandidateVerdict>& verdicts) const;
+
+ private:
+  std::vector<OverlayMatch> matchOverlays(const match::TextureDescription& bitmap,
+                                          const std::vector<cv::Rect>& boxes) const;
+  std::optional<LayerPlan> judged(const match::TextureDescription& bitmap, LayerPlan plan) const;
+
+  const match::MatchCascade& cascade_;
+  const match::TextureCatalog& catalog_;
+  pattern::PatternStageConfig patterns_;
+};
+
+// A stored pattern the cascade's prefilter let through, with its CCV distance.
+struct PatternCandidate {
+  std::shared_ptr<const match::StoredTexture> texture;
+  double ccv_distance = 0.0;
+};
+
+// The first candidate that shows `shown` (a bitmap, or the part its overlays leave) as
+// faithfully as a reuse must, aligned to `found` through the two lattices (match/
+// pattern_alignment.h): two walls of the same bricks share one tile even when their texel
+// grids are turned against each other.
+std::optional<match::CandidateVerdict> reuseStoredPattern(
+    const pattern::Pattern& found, const match::TextureDescription& shown,
+    const std::vector<PatternCandidate>& candidates, const match::MatchConfig& config);
+
+// Patch texel -> texel of the crop `box` (an overlay's own texture).
+core::Similarity2 patchToBox(const cv::Rect& box);
+
+// How faithfully a plan's layers (the new pattern or the stored texture `base_reuse` names,
+// then the overlays, each a reuse or its own crop) show `bitmap`; stored textures from
+// `catalog`.
+match::Fidelity layeredFidelity(const match::TextureDescription& bitmap, const LayerPlan& plan,
+                                const match::TextureCatalog& catalog);
+
+}  // namespace tessera::reuse

@@ -1,0 +1,21 @@
+# Fails when a test named in LABELS_FILE (tests/CMakeLists.txt's tessera_label) is not one that
+# ctest knows with that label: a renamed test would otherwise lose its label silently.
+execute_process(COMMAND ${CTEST} --test-dir ${BUILD_DIR} -N -L "^(slow|realtime)$"
+                OUTPUT_VARIABLE listed RESULT_VARIABLE failed)
+if(failed)
+  message(FATAL_ERROR "ctest -N failed in ${BUILD_DIR}")
+endif()
+file(STRINGS ${LABELS_FILE} lines REGEX "set_tests_properties")
+set(missing "")
+foreach(line IN LISTS lines)
+  string(REGEX REPLACE "^set_tests_properties\\(\\[=\\[([^]]+)\\]=\\].*$" "\\1" name "${line}")
+  string(FIND "${listed}" ": ${name}\n" at)
+  if(at EQUAL -1)
+    list(APPEND missing ${name})
+  endif()
+endforeach()
+list(LENGTH lines count)
+if(missing)
+  message(FATAL_ERROR "labelled in tests/CMakeLists.txt but not a test: ${missing}")
+endif()
+message(STATUS "all ${count} labelled tests exist")
