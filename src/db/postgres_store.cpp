@@ -251,7 +251,7 @@ PostgresStore::PostgresStore(const std::string& url, const OpenOptions& options)
     throw core::Error(fmt::format("{}: cannot open the texture database: {}", location_, e.what()));
   }
   read_only_ = options.read_only;
-  pool_.push_back(std::move(first));
+  pool_.give(std::move(first));
 }
 
 PostgresStore::~PostgresStore() = default;
@@ -266,20 +266,6 @@ bool connectionLost(const std::exception& error) {
     return state.rfind("08", 0) == 0 || state.rfind("57P", 0) == 0;
   }
   return false;
-}
-
-PostgresStore::ReadLease::ReadLease(const PostgresStore& store) : store_(store) {
-  const std::lock_guard lock(store.pool_mutex_);
-  if (!store.pool_.empty()) {
-    connection_ = std::move(store.pool_.back());
-    store.pool_.pop_back();
-  }
-}
-
-PostgresStore::ReadLease::~ReadLease() {
-  if (!connection_) return;  // broken: the next lease connects anew
-  const std::lock_guard lock(store_.pool_mutex_);
-  store_.pool_.push_back(std::move(connection_));
 }
 
 void PostgresStore::checkWritable() const {

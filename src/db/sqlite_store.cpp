@@ -85,7 +85,7 @@ SqliteStore::SqliteStore(const std::filesystem::path& path, const OpenOptions& o
     }
     configureWriter(*writer_);
   }
-  pool_.push_back(std::move(checker));
+  pool_.give(std::move(checker));
 }
 
 SqliteStore::~SqliteStore() {
@@ -106,24 +106,17 @@ SqliteStore::~SqliteStore() {
   writer_.reset();
 }
 
-SqliteStore::ReadLease::ReadLease(const SqliteStore& store) : store_(store) {
-  {
-    const std::lock_guard lock(store.pool_mutex_);
-    if (!store.pool_.empty()) {
-      connection_ = std::move(store.pool_.back());
-      store.pool_.pop_back();
-      return;
-    }
-  }
-  // Opened outside the lock: opening reads the file, and other readers need not wait for it.
-  connection_ = std::make_unique<Connection>(store.path_, SQLITE_OPEN_READONLY);
-  configureReader(*connection_);
+SqliteStore::ReadLease::ReadLease(const SqliteStore& store) : lease_(store.pool_) {
+  if (lease_.connection()) return;
+  // Opened outside the pool's lock: opening reads the file, and other readers need not wait
+  // for it. Lent only once configured.
+  auto connection = std::make_unique<Connection>(store.path_, SQLITE_OPEN_READONLY);
+  configureReader(*connection);
+  lease_.connection() = std::move(connection);
 }
 
 SqliteStore::ReadLease::~ReadLease() {
-  connection_->rollbackQuietly();  // ends a read transaction an exception left open
-  const std::lock_guard lock(store_.pool_mutex_);
-  store_.pool_.push_back(std::move(connection_));
+  lease_.connection()->rollbackQuietly();  // ends a read transaction an exception left open
 }
 
 Connection& SqliteStore::writer() {

@@ -8,8 +8,8 @@
 #include <fmt/format.h>
 #include <opencv2/imgproc.hpp>
 
+#include "internal/truth_geometry.h"
 #include "tessera/core/error.h"
-#include "truth_geometry.h"
 
 namespace tessera::eval {
 

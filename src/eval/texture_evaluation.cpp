@@ -13,6 +13,7 @@
 #include <opencv2/core/utility.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "internal/truth_geometry.h"
 #include "tessera/core/config.h"
 #include "tessera/core/error.h"
 #include "tessera/drivers/synthetic/texture.h"
@@ -21,7 +22,6 @@
 #include "tessera/pattern/lattice.h"
 #include "tessera/texture/bitmap_builder.h"
 #include "tessera/texture/bitmap_export.h"
-#include "truth_geometry.h"
 
 namespace tessera::eval {
 

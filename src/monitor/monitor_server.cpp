@@ -12,7 +12,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
-#include "page.h"
+#include "internal/page.h"
 #include "tessera/core/error.h"
 #include "tessera/db/texture_store.h"
 #include "tessera/db/texture_summary_json.h"

@@ -1,4 +1,4 @@
-#include "lattice_refinement.h"
+#include "internal/lattice_refinement.h"
 
 #include <array>
 #include <cmath>

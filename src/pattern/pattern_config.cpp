@@ -14,7 +14,12 @@ void readConfig(const core::ConfigSection& section, PatternStageConfig& config) 
   section.read("min_period_px", p.lattice.min_period_px);
   section.read("stripe_rho", p.lattice.stripe_rho);
   section.read("min_angle_deg", p.lattice.min_angle_deg);
-  section.read("min_psnr_db", p.min_psnr_db);
+  if (section.has("min_psnr_db")) {  // the name it had when two sections used it
+    throw core::ConfigError(
+        "pattern: min_psnr_db is now min_tiling_psnr_db (the tiling's own PSNR; "
+        "match.min_psnr_db is the rule for a reuse)");
+  }
+  section.read("min_tiling_psnr_db", p.min_tiling_psnr_db);
   section.read("min_explained", p.min_explained);
   section.read("max_overlay_share", p.max_overlay_share);
   section.read("min_repeats", p.min_repeats);

@@ -11,9 +11,9 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
 
-#include "lattice_refinement.h"
+#include "internal/lattice_refinement.h"
+#include "internal/tiling.h"
 #include "tessera/core/error.h"
-#include "tiling.h"
 
 namespace tessera::pattern {
 
@@ -276,7 +276,8 @@ std::string unfaithfulness(const Pattern& p, double unexplained_share,
   if (p.explained < config.min_explained) {
     return fmt::format("the tiling explains {:.0f} % of the variance", 100.0 * p.explained);
   }
-  if (p.psnr_db < config.min_psnr_db) return fmt::format("the tiling reaches {:.1f} dB", p.psnr_db);
+  if (p.psnr_db < config.min_tiling_psnr_db)
+    return fmt::format("the tiling reaches {:.1f} dB", p.psnr_db);
   return {};
 }
 

@@ -1,4 +1,4 @@
-#include "tiling.h"
+#include "internal/tiling.h"
 
 #include <algorithm>
 #include <array>

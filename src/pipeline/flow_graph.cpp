@@ -2,6 +2,7 @@
 
 #include <chrono>
 #include <thread>
+#include <tuple>
 
 #include <oneapi/tbb/flow_graph.h>
 #include <oneapi/tbb/task_arena.h>
@@ -19,6 +20,40 @@ struct Numbered {
   T item;
 };
 
+// Numbers the patches the plane stage finalizes (and those it retires) in the order they
+// happened, and groups each frame's finalized patches into one batch.
+class PatchJobs {
+ public:
+  std::vector<PatchJob> finalized(std::vector<planes::PatchSnapshot>& patches,
+                                  std::uint64_t frame_index) {
+    std::vector<PatchJob> jobs;
+    const auto now = std::chrono::steady_clock::now();
+    for (planes::PatchSnapshot& patch : patches) {
+      jobs.push_back(
+          {next_sequence_++, next_batch_, patches.size(), frame_index, std::move(patch), now, {}});
+    }
+    if (!jobs.empty()) ++next_batch_;
+    patches.clear();
+    return jobs;
+  }
+
+  // Patches merged into others leave the database in the same order.
+  std::vector<PatchJob> retired(const std::vector<planes::PatchEvent>& events) {
+    std::vector<PatchJob> jobs;
+    for (const planes::PatchEvent& event : events) {
+      if (event.kind != planes::PatchEvent::Kind::kRetired) continue;
+      PatchJob job;
+      job.sequence = next_sequence_++;
+      job.retired = event.id;
+      jobs.push_back(std::move(job));
+    }
+    return jobs;
+  }
+
+ private:
+  std::size_t next_sequence_ = 0, next_batch_ = 0;
+};
+
 }  // namespace
 
 int defaultThreadCount() {
@@ -26,10 +61,10 @@ int defaultThreadCount() {
   return hardware == 0 ? 1 : static_cast<int>(hardware);
 }
 
-void runGraph(SourceStage& source, TrackingStage& tracking, IntegrationStage& integration,
-              PlaneStage& planes, TextureStage& textures, const DescribeStage& describer,
-              CommitStage& committer, StatsSink& sink, const GraphOptions& options) {
+std::size_t runGraph(FramePath& frames, PatchPath& patches, RunReport& report,
+                     const GraphOptions& options) {
   const int threads = options.threads > 0 ? options.threads : defaultThreadCount();
+  std::size_t frames_reported = 0;  // frames of the stream, interruption markers aside
   oneapi::tbb::task_arena arena(threads);
   arena.execute([&] {
     flow::graph graph;
@@ -40,7 +75,7 @@ void runGraph(SourceStage& source, TrackingStage& tracking, IntegrationStage& in
     std::uint64_t next_frame = 0;
     flow::input_node<Numbered<core::Frame>> source_node(
         graph, [&](oneapi::tbb::flow_control& control) {
-          std::optional<core::Frame> frame = source.next();
+          std::optional<core::Frame> frame = frames.next();
           if (!frame) {
             control.stop();
             return Numbered<core::Frame>{};
@@ -56,86 +91,62 @@ void runGraph(SourceStage& source, TrackingStage& tracking, IntegrationStage& in
     flow::sequencer_node<Numbered<core::Frame>> to_tracking(graph, numbered);
     flow::function_node<Numbered<core::Frame>, Numbered<TrackedFrame>> tracking_node(
         graph, flow::serial, [&](Numbered<core::Frame> frame) {
-          return Numbered<TrackedFrame>{frame.number, tracking.process(std::move(frame.item))};
+          return Numbered<TrackedFrame>{frame.number, frames.track(std::move(frame.item))};
         });
     flow::sequencer_node<Numbered<TrackedFrame>> to_integration(graph, numbered);
     flow::function_node<Numbered<TrackedFrame>, Numbered<FusedFrame>> integration_node(
         graph, flow::serial, [&](Numbered<TrackedFrame> tracked) {
-          return Numbered<FusedFrame>{tracked.number, integration.process(std::move(tracked.item))};
+          return Numbered<FusedFrame>{tracked.number, frames.integrate(std::move(tracked.item))};
         });
     flow::sequencer_node<Numbered<FusedFrame>> to_planes(graph, numbered);
-    // The plane stage sends the frame on to the sink and each patch it finalized to texturing,
-    // numbered in finalization order.
-    std::size_t next_sequence = 0, next_batch = 0;
-    auto jobsOf = [&](std::vector<planes::PatchSnapshot>& patches, std::uint64_t frame_index) {
-      std::vector<PatchJob> jobs;
-      const auto now = std::chrono::steady_clock::now();
-      for (planes::PatchSnapshot& patch : patches) {
-        jobs.push_back(
-            {next_sequence++, next_batch, patches.size(), frame_index, std::move(patch), now, {}});
-      }
-      if (!jobs.empty()) ++next_batch;
-      patches.clear();
-      return jobs;
-    };
-    // Patches merged into others leave the database in the same order.
-    auto retirementsOf = [&](const std::vector<planes::PatchEvent>& events) {
-      std::vector<PatchJob> jobs;
-      for (const planes::PatchEvent& event : events) {
-        if (event.kind != planes::PatchEvent::Kind::kRetired) continue;
-        PatchJob job;
-        job.sequence = next_sequence++;
-        job.retired = event.id;
-        jobs.push_back(std::move(job));
-      }
-      return jobs;
-    };
+    // The plane stage sends the frame on to the report and each patch it finalized (or
+    // retired) to the patch path, numbered in the order it happened.
+    PatchJobs jobs;
     using PlanesNode =
         flow::multifunction_node<Numbered<FusedFrame>, std::tuple<Numbered<FusedFrame>, PatchJob>>;
     PlanesNode planes_node(
         graph, flow::serial, [&](Numbered<FusedFrame> fused, PlanesNode::output_ports_type& out) {
-          fused.item = planes.process(std::move(fused.item));
-          for (PatchJob& job : retirementsOf(fused.item.patch_events)) {
+          fused.item = frames.findPlanes(std::move(fused.item));
+          for (PatchJob& job : jobs.retired(fused.item.patch_events)) {
             std::get<1>(out).try_put(std::move(job));
           }
-          for (PatchJob& job : jobsOf(fused.item.finalized_patches, fused.item.frame.index)) {
+          for (PatchJob& job :
+               jobs.finalized(fused.item.finalized_patches, fused.item.frame.index)) {
             std::get<1>(out).try_put(std::move(job));
           }
           std::get<0>(out).try_put(std::move(fused));
         });
     // Bitmaps are built and described independently: as many at once as there are free
-    // threads, off the frame path. They are matched and committed one at a time, in
-    // finalization order.
+    // threads, off the frame path. They are committed one at a time, in finalization order.
     flow::function_node<PatchJob, DescribedPatch> describe_node(
-        graph, flow::unlimited, [&](const PatchJob& job) { return describer.process(job); });
+        graph, flow::unlimited, [&](const PatchJob& job) { return patches.describe(job); });
     flow::sequencer_node<DescribedPatch> in_order(
         graph, [](const DescribedPatch& described) { return described.sequence; });
-    flow::function_node<DescribedPatch, flow::continue_msg> commit_node(
-        graph, flow::serial, [&](DescribedPatch described) {
-          if (described.retired) {
-            committer.retire(*described.retired);
-            return flow::continue_msg{};
+    using CommitNode = flow::multifunction_node<DescribedPatch, std::tuple<CommitMessage>>;
+    CommitNode commit_node(graph, flow::serial,
+                           [&](DescribedPatch described, CommitNode::output_ports_type& out) {
+                             if (auto message = patches.commit(std::move(described))) {
+                               std::get<0>(out).try_put(std::move(*message));
+                             }
+                           });
+    // Frames (in stream order) and commits (in finalization order) meet at the one node that
+    // writes the report; a reported frame lets the source read another.
+    flow::sequencer_node<Numbered<FusedFrame>> to_report(graph, numbered);
+    using ReportInput = flow::indexer_node<Numbered<FusedFrame>, CommitMessage>;
+    ReportInput report_input(graph);
+    using ReportNode =
+        flow::multifunction_node<ReportInput::output_type, std::tuple<flow::continue_msg>>;
+    ReportNode report_node(
+        graph, flow::serial,
+        [&](const ReportInput::output_type& message, ReportNode::output_ports_type& out) {
+          if (message.tag() == 1) {
+            report.committed(flow::cast_to<CommitMessage>(message));
+            return;
           }
-          const DescribedPatch::Batch batch = described.batchInfo();
-          std::optional<texture::PatchBitmap> bitmap = described.bitmap;
-          const CommitRecord record = committer.process(std::move(described));
-          textures.keep(std::move(bitmap));
-          const CommitStage::Economy economy = committer.economy();
-          MonitorCommit totals;
-          totals.textures_stored = committer.texturesStored();
-          totals.patterns_stored = committer.patternsStored();
-          totals.textured_patches = economy.textured_patches;
-          totals.reuses = economy.reuses;
-          totals.bytes_before = economy.bytes_before;
-          totals.bytes_after = economy.bytes_after;
-          sink.writeCommit(record, batch.index, batch.size, batch.frame_index, totals);
-          return flow::continue_msg{};
-        });
-    flow::sequencer_node<Numbered<FusedFrame>> to_sink(graph, numbered);
-    flow::function_node<Numbered<FusedFrame>, flow::continue_msg> sink_node(
-        graph, flow::serial, [&](const Numbered<FusedFrame>& fused) {
-          sink.process(fused.item);
-          return flow::continue_msg{};
+          const FusedFrame& fused = flow::cast_to<Numbered<FusedFrame>>(message).item;
+          report.frameDone(fused);
+          if (!fused.frame.source_interrupted) ++frames_reported;
+          std::get<0>(out).try_put(flow::continue_msg{});
         });
 
     flow::make_edge(source_node, limiter);
@@ -145,26 +156,29 @@ void runGraph(SourceStage& source, TrackingStage& tracking, IntegrationStage& in
     flow::make_edge(to_integration, integration_node);
     flow::make_edge(integration_node, to_planes);
     flow::make_edge(to_planes, planes_node);
-    flow::make_edge(flow::output_port<0>(planes_node), to_sink);
-    flow::make_edge(to_sink, sink_node);
+    flow::make_edge(flow::output_port<0>(planes_node), to_report);
+    flow::make_edge(to_report, flow::input_port<0>(report_input));
     flow::make_edge(flow::output_port<1>(planes_node), describe_node);
     flow::make_edge(describe_node, in_order);
     flow::make_edge(in_order, commit_node);
-    flow::make_edge(sink_node, limiter.decrementer());
+    flow::make_edge(flow::output_port<0>(commit_node), flow::input_port<1>(report_input));
+    flow::make_edge(report_input, report_node);
+    flow::make_edge(flow::output_port<0>(report_node), limiter.decrementer());
 
     source_node.activate();
     graph.wait_for_all();
 
     // End of stream: the patches still live are finalized and textured like the others.
     std::vector<planes::PatchSnapshot> finalized;
-    const std::vector<planes::PatchEvent> events = planes.finishStream(finalized);
-    sink.writePatchEvents(events);
-    const std::uint64_t end_index = sink.framesDone();
-    for (PatchJob& job : retirementsOf(events)) describe_node.try_put(std::move(job));
-    for (PatchJob& job : jobsOf(finalized, end_index)) describe_node.try_put(std::move(job));
+    const std::vector<planes::PatchEvent> events = frames.finishStream(finalized);
+    report.patchEvents(events);
+    for (PatchJob& job : jobs.retired(events)) describe_node.try_put(std::move(job));
+    for (PatchJob& job : jobs.finalized(finalized, frames_reported)) {
+      describe_node.try_put(std::move(job));
+    }
     graph.wait_for_all();
   });
-  sink.flush();
+  return frames_reported;
 }
 
 }  // namespace tessera::pipeline

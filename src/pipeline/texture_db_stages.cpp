@@ -35,8 +35,12 @@ DescribedPatch DescribeStage::process(const PatchJob& job) const {
   described.finalized_at = job.finalized_at;
   described.retired = job.retired;
   if (job.retired) return described;
-  described.bitmap = textures_.build(job.patch);
-  if (!described.bitmap) return described;
+  try {
+    described.bitmap = texture::buildBitmap(job.patch, bitmaps_);
+  } catch (const std::exception& e) {  // cv::Exception, bad_alloc: this patch goes untextured
+    spdlog::warn("patch {} version {}: no bitmap: {}", job.patch.id, job.patch.version, e.what());
+    return described;
+  }
   const texture::PatchBitmap& bitmap = *described.bitmap;
   if (!match_.enabled) {  // stored as it is: no description, no candidates
     described.description = match::TextureDescription{bitmap.image, validTexels(bitmap), {}, {}};

@@ -6,10 +6,12 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "db/store_test_support.h"
+#include "support/run_fingerprint.h"
 #include "support/synthetic_plane.h"
 #include "support/test_data.h"
 #include "tessera/core/error.h"
 #include "tessera/drivers/dataset_source.h"
+#include "tessera/drivers/oni/oni_source.h"
 #include "tessera/eval/run_evaluation.h"
 #include "tessera/pipeline/run.h"
 #include "tessera/pipeline/texture_db_stages.h"
@@ -241,16 +243,25 @@ TEST(Pipeline, EveryOtherFrameIsIntegratedAndEveryFrameIsPosed) {
   EXPECT_EQ(poses, 7);
 }
 
+// The office's first 40 frames, tracked, with one thread and with four: the same textures and
+// instances in the database, and the same report but its timings.
 TEST(Pipeline, ResultDoesNotDependOnThreadCount) {
-  std::vector<std::size_t> vertices;
-  for (int threads : {1, 2}) {
-    ScriptedSource source(5, {});
+  const fs::path recording = test::sourceDir() / "recordings/office.oni";
+  if (!fs::is_regular_file(recording)) {
+    GTEST_SKIP() << recording << " is not rendered (TESSERA_RENDER_DEFAULT_RECORDING=ON)";
+  }
+  std::vector<std::string> fingerprints;
+  for (int threads : {1, 4}) {
+    drivers::oni::OniSource source(recording);
     RunOptions options;
     options.out_dir = test::freshTempDir() / std::to_string(threads);
     options.threads = threads;
-    vertices.push_back(runPipeline(source, loadRunConfig(std::nullopt), options).mesh_vertices);
+    options.max_frames = 40;
+    const RunSummary summary = runPipeline(source, loadRunConfig(std::nullopt), options);
+    EXPECT_GE(summary.textured_patches, 3u);
+    fingerprints.push_back(test::runFingerprint(options.out_dir));
   }
-  EXPECT_EQ(vertices[0], vertices[1]);
+  EXPECT_EQ(fingerprints[0], fingerprints[1]);
 }
 
 TEST(Pipeline, AbnormalEndKeepsTheWorkDone) {
@@ -269,10 +280,10 @@ TEST(Pipeline, AbnormalEndKeepsTheWorkDone) {
 
 // A bitmap whose files cannot be written (the textures folder is a file: as on a full disk)
 // stays in memory, and flush() writes it once it can; the newest version of a patch wins.
-TEST(TextureStageFiles, ABitmapThatCannotBeWrittenStaysUntilFlush) {
+TEST(BitmapFiles, ABitmapThatCannotBeWrittenStaysUntilFlush) {
   const std::filesystem::path out = test::freshTempDir();
   std::ofstream(out / "textures") << "in the way";
-  TextureStage stage(texture::BitmapConfig{}, out);
+  BitmapFiles stage(out);
   texture::PatchBitmap bitmap;
   bitmap.id = 4;
   bitmap.version = 1;

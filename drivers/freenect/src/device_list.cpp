@@ -4,8 +4,8 @@
 
 #include <fmt/format.h>
 
-#include "fakenect_dump.h"
-#include "freenect_runtime.h"
+#include "internal/fakenect_dump.h"
+#include "internal/freenect_runtime.h"
 #include "tessera/drivers/freenect/freenect_source.h"
 
 namespace tessera::drivers::freenect {

@@ -1,4 +1,4 @@
-#include "fakenect_dump.h"
+#include "internal/fakenect_dump.h"
 
 #include <link.h>
 

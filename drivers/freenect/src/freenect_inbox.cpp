@@ -1,4 +1,4 @@
-#include "freenect_inbox.h"
+#include "internal/freenect_inbox.h"
 
 #include "tessera/core/clock.h"
 

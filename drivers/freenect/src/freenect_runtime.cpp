@@ -1,4 +1,4 @@
-#include "freenect_runtime.h"
+#include "internal/freenect_runtime.h"
 
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>

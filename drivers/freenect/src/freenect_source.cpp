@@ -9,9 +9,9 @@
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
-#include "fakenect_dump.h"
-#include "freenect_inbox.h"
-#include "freenect_runtime.h"
+#include "internal/fakenect_dump.h"
+#include "internal/freenect_inbox.h"
+#include "internal/freenect_runtime.h"
 #include "tessera/core/error.h"
 #include "tessera/drivers/freenect/kinect_v1.h"
 

@@ -1,11 +1,11 @@
-#include "oni_salvage.h"
+#include "internal/oni_salvage.h"
 
 #include <cstring>
 #include <fstream>
 
 #include <fmt/format.h>
 
-#include "oni_format.h"
+#include "internal/oni_format.h"
 #include "tessera/core/error.h"
 
 namespace tessera::drivers::oni::internal {

@@ -12,7 +12,7 @@
 #include <spdlog/spdlog.h>
 #include <nlohmann/json.hpp>
 
-#include "oni_salvage.h"
+#include "internal/oni_salvage.h"
 #include "tessera/core/error.h"
 #include "tessera/drivers/oni/ground_truth_file.h"
 #include "tessera/drivers/oni/openni_runtime.h"

@@ -9,7 +9,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
-#include "oni_format.h"
+#include "internal/oni_format.h"
 #include "tessera/core/error.h"
 
 namespace tessera::drivers::oni {

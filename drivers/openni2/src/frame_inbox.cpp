@@ -1,4 +1,4 @@
-#include "frame_inbox.h"
+#include "internal/frame_inbox.h"
 
 #include "tessera/core/clock.h"
 

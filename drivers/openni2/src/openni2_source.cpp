@@ -9,7 +9,7 @@
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
-#include "frame_inbox.h"
+#include "internal/frame_inbox.h"
 #include "tessera/core/error.h"
 #include "tessera/drivers/oni/ground_truth_file.h"
 #include "tessera/drivers/oni/oni_source.h"

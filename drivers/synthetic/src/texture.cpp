@@ -10,7 +10,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
-#include "noise.h"
+#include "internal/noise.h"
 #include "tessera/core/error.h"
 
 namespace tessera::drivers::synthetic {

@@ -23,7 +23,7 @@ struct PatternConfig {
   double blur_sigma_px = 1.0;  // of the grey image before the autocorrelation (0: none)
   LatticeConfig lattice;
   // A faithful tiling, over the texels it explains (overlays left out):
-  double min_psnr_db = 20.0;        // ... at least this PSNR
+  double min_tiling_psnr_db = 20.0;  // ... at least this PSNR (not match.min_psnr_db)
   double min_explained = 0.5;       // ... explains this share of the bitmap's colour variance
   double max_overlay_share = 0.35;  // ... leaves at most this share unexplained
   double min_repeats = 3.0;         // ... from at least this many cells' worth of bitmap

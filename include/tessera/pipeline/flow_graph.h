@@ -1,24 +1,73 @@
 #pragma once
-// The one place that knows the topology: source -> limiter -> tracking -> integration ->
-// planes -> stats sink, with the patches the plane stage finalizes going on to texturing and
-// description (many patches at once) -> a sequencer (finalization order) -> the serial match
-// and commit to the texture database, as a tbb::flow::graph inside a task_arena of the requested
-// concurrency.
+// The one place that knows the topology, as a tbb::flow::graph inside a task_arena of the
+// requested concurrency:
+//
+//   source -> limiter -> tracking -> integration -> planes -----------------> report
+//                ^                                    | finalized patches       ^
+//                |                                    v                         |
+//                |                        describe (many at once)               |
+//                |                                    v                         |
+//                |                       commit (serial, in finalization order) -+
+//                +---------------- a frame reported frees its place ------------+
+//
+// Every serial stage takes its messages in order: frames in stream order, patches in
+// finalization order (sequencer nodes). The report node is the only one that writes the
+// run's figures; commit records reach it on an edge. The graph calls the stages through the
+// narrow interfaces below, so that it can be tested with fakes.
+#include <cstddef>
+#include <optional>
+#include <vector>
+
 #include "tessera/pipeline/stages.h"
 #include "tessera/pipeline/texture_db_stages.h"
 
 namespace tessera::pipeline {
+
+// The frame path: serial stages called one frame at a time, in stream order.
+class FramePath {
+ public:
+  virtual ~FramePath() = default;
+  virtual std::optional<core::Frame> next() = 0;  // nothing: the end of the stream
+  virtual TrackedFrame track(core::Frame frame) = 0;
+  virtual FusedFrame integrate(TrackedFrame tracked) = 0;
+  // Also names the patches the frame finalized (finalized_patches) and what else changed
+  // (patch_events).
+  virtual FusedFrame findPlanes(FusedFrame fused) = 0;
+  // End of the stream: finalizes what is left (into `finalized`) and says what changed.
+  virtual std::vector<planes::PatchEvent> finishStream(
+      std::vector<planes::PatchSnapshot>& finalized) = 0;
+};
+
+// The patch path: each finalized patch described (many at once), then committed one at a time
+// in finalization order.
+class PatchPath {
+ public:
+  virtual ~PatchPath() = default;
+  virtual DescribedPatch describe(const PatchJob& job) const = 0;  // thread-safe
+  // What the report is told of the commit; nothing for a retirement.
+  virtual std::optional<CommitMessage> commit(DescribedPatch described) = 0;
+};
+
+// Where the run's figures go; called from one node at a time: frames in stream order,
+// commits in finalization order.
+class RunReport {
+ public:
+  virtual ~RunReport() = default;
+  virtual void frameDone(const FusedFrame& fused) = 0;
+  virtual void committed(const CommitMessage& commit) = 0;
+  // At the end of the stream (the graph waits), what finishing the patches changed.
+  virtual void patchEvents(const std::vector<planes::PatchEvent>& events) = 0;
+};
 
 struct GraphOptions {
   int threads = 0;               // 0: hardware threads
   int max_frames_in_flight = 4;  // replay back-pressure (limiter_node)
 };
 
-// Runs the stages over the whole stream, then flushes them in order (end of stream).
-// Blocks until done.
-void runGraph(SourceStage& source, TrackingStage& tracking, IntegrationStage& integration,
-              PlaneStage& planes, TextureStage& textures, const DescribeStage& describer,
-              CommitStage& committer, StatsSink& sink, const GraphOptions& options);
+// Runs the stages over the whole stream, then finishes the patches (end of stream) and waits
+// for their commits. Blocks until done; returns the frames reported.
+std::size_t runGraph(FramePath& frames, PatchPath& patches, RunReport& report,
+                     const GraphOptions& options);
 
 // Hardware threads, at least 1.
 int defaultThreadCount();

@@ -1,7 +1,7 @@
 #pragma once
 // The stages of `tessera run`, as plain classes with a narrow process()/flush() call.
-// They know nothing of TBB: flow_graph.h wires them. Each stage is called by one node at a
-// time (serial nodes), so none of them locks.
+// They know nothing of TBB: flow_graph.h wires them. Each stage is called from one node of the
+// graph (a serial node, unless it says it is thread-safe), so none of them locks.
 #include <atomic>
 #include <cstddef>
 #include <cstdint>
@@ -10,7 +10,6 @@
 #include <functional>
 #include <map>
 #include <memory>
-#include <mutex>
 #include <optional>
 #include <string>
 
@@ -30,7 +29,7 @@
 
 namespace tessera::pipeline {
 
-struct CommitRecord;  // texture_db_stages.h
+struct CommitMessage;  // texture_db_stages.h
 
 // Pulls frames from a FrameSource; bad frames are counted, logged and skipped. An interrupted
 // live source gives a marker frame (Frame::source_interrupted) so that the stages finalize
@@ -244,17 +243,12 @@ class PlaneStage {
   StageTimer timer_;
 };
 
-// Builds the bitmap of each finalized patch (many at once: build() is thread-safe) and keeps
-// the newest version of each patch's bitmap (keep(), called by one node at a time).
-class TextureStage {
+// Keeps the newest version of each patch's bitmap, written under out_dir/textures/, after
+// its commit (the commit node's).
+class BitmapFiles {
  public:
-  // Bitmaps are written under out_dir/textures/ as they are kept.
-  TextureStage(const texture::BitmapConfig& config, std::filesystem::path out_dir)
-      : config_(config), out_dir_(std::move(out_dir)) {}
+  explicit BitmapFiles(std::filesystem::path out_dir) : out_dir_(std::move(out_dir)) {}
 
-  // Nothing (with a warning naming the patch) when the bitmap cannot be built, so that one bad
-  // patch costs its bitmap only, never the run.
-  std::optional<texture::PatchBitmap> build(const planes::PatchSnapshot& patch) const;
   // Writes the bitmap's files when it is the newest version of its patch, and lets its pixels
   // go (the map's memory stays bounded); one whose files cannot be written (disk full) stays
   // in memory until flush().
@@ -272,7 +266,6 @@ class TextureStage {
   std::size_t bitmapBytes() const { return bitmap_bytes_.load(); }
 
  private:
-  texture::BitmapConfig config_;
   std::filesystem::path out_dir_;
   planes::TextureBindings written_;
   std::map<int, texture::PatchBitmap> unwritten_;  // newest versions whose files failed
@@ -307,11 +300,9 @@ class StatsSink {
   void writePatchEvents(const std::vector<planes::PatchEvent>& events);
   // One line per committed patch ({"type":"patch","event":"committed",...}) and, once every
   // patch of its batch (the patches one frame finalized) is in, one {"type":"match",...} line
-  // with the batch's CCV prefilter counts. Called by the commit node, beside process().
-  // `totals`: the run's figures after this commit, for the monitor (textures_stored and
-  // patterns_stored also go into the lines).
-  void writeCommit(const CommitRecord& record, std::size_t batch, std::size_t batch_size,
-                   std::uint64_t frame_index, const MonitorCommit& totals);
+  // with the batch's CCV prefilter counts. The totals (the run's figures after this commit)
+  // go to the monitor; textures_stored also into the lines.
+  void writeCommit(const CommitMessage& commit);
   // Every frame and commit also updates `monitor` (may be null); `frames_dropped` says how many
   // frames a live source has dropped so far.
   void attachMonitor(MapMonitor* monitor, std::function<std::size_t()> frames_dropped);
@@ -350,9 +341,7 @@ class StatsSink {
   std::vector<double> rss_mb_;  // resident memory after each frame
   std::size_t interruptions_ = 0;
   bool write_failed_ = false;
-  // process() and writeCommit() run on different nodes; the stream is theirs in turn.
-  std::recursive_mutex write_mutex_;
-  std::atomic<std::size_t> textures_stored_{0};
+  std::size_t textures_stored_ = 0;
   struct BatchCounts {
     std::size_t patches = 0, considered = 0, removed = 0, reuses = 0;
   };

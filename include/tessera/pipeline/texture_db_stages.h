@@ -66,13 +66,13 @@ struct DescribedPatch {
 // it. Thread-safe: many patches at once.
 class DescribeStage {
  public:
-  DescribeStage(const TextureStage& textures, const match::MatchConfig& match,
+  DescribeStage(const texture::BitmapConfig& bitmaps, const match::MatchConfig& match,
                 const pattern::PatternStageConfig& patterns)
-      : textures_(textures), match_(match), patterns_(patterns) {}
+      : bitmaps_(bitmaps), match_(match), patterns_(patterns) {}
   DescribedPatch process(const PatchJob& job) const;
 
  private:
-  const TextureStage& textures_;
+  texture::BitmapConfig bitmaps_;
   match::MatchConfig match_;
   pattern::PatternStageConfig patterns_;
 };
@@ -86,6 +86,14 @@ struct CommitRecord {
   std::size_t ccv_considered = 0, ccv_removed = 0;
   double bitmap_ms = 0.0, describe_ms = 0.0, match_ms = 0.0, pattern_ms = 0.0;
   double commit_latency_ms = 0.0;
+};
+
+// A commit as the run's report sees it: what was decided, the batch of patches it belongs to,
+// and the run's totals after it.
+struct CommitMessage {
+  CommitRecord record;
+  DescribedPatch::Batch batch;
+  MonitorCommit totals;
 };
 
 // Serial, in finalization order: plans each patch's commit against every texture stored so

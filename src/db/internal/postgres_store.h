@@ -18,6 +18,7 @@
 #include <fmt/format.h>
 #include <pqxx/pqxx>
 
+#include "internal/connection_pool.h"
 #include "internal/postgres_open.h"
 #include "tessera/core/error.h"
 #include "tessera/db/texture_store.h"
@@ -45,19 +46,9 @@ class PostgresStore final : public TextureStore {
   StoreStats stats() const override;
 
  private:
-  // A pooled connection lent for one read.
-  class ReadLease {
-   public:
-    explicit ReadLease(const PostgresStore& store);
-    ~ReadLease();
-    ReadLease(const ReadLease&) = delete;
-    ReadLease& operator=(const ReadLease&) = delete;
-    std::unique_ptr<pqxx::connection>& connection() { return connection_; }
-
-   private:
-    const PostgresStore& store_;
-    std::unique_ptr<pqxx::connection> connection_;
-  };
+  // A pooled connection lent for one read; none when all are out, and reset when it broke
+  // (onConnection connects).
+  using ReadLease = ConnectionPool<pqxx::connection>::Lease;
 
   std::unique_ptr<pqxx::connection> connect() const;  // throws ServerUnavailable
   // Runs `work(connection)`, connecting first when `connection` is closed. When the
@@ -80,8 +71,7 @@ class PostgresStore final : public TextureStore {
   std::mutex write_mutex_;
   bool read_only_ = false;
   std::unique_ptr<pqxx::connection> writer_;  // null until the first write, or after a break
-  mutable std::mutex pool_mutex_;
-  mutable std::vector<std::unique_ptr<pqxx::connection>> pool_;
+  mutable ConnectionPool<pqxx::connection> pool_;  // idle readers
 };
 
 // True for the errors that mean the connection is gone rather than the statement wrong:
@@ -110,7 +100,7 @@ auto PostgresStore::onConnection(std::unique_ptr<pqxx::connection>& connection, 
 
 template <typename F>
 auto PostgresStore::read(F&& work) const {
-  ReadLease lease(*this);
+  ReadLease lease(pool_);
   try {
     return onConnection(lease.connection(), [&](pqxx::connection& connection) {
       pqxx::read_transaction tx(connection);

@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "internal/connection_pool.h"
 #include "internal/sqlite_connection.h"
 #include "tessera/db/texture_store.h"
 
@@ -37,18 +38,16 @@ class SqliteStore final : public TextureStore {
   StoreStats stats() const override;
 
  private:
-  // A pooled read-only connection, lent for one read and given back when the lease ends.
+  // A pooled read-only connection, lent for one read (opened when none is idle) and given back
+  // when the lease ends.
   class ReadLease {
    public:
     explicit ReadLease(const SqliteStore& store);
     ~ReadLease();
-    ReadLease(const ReadLease&) = delete;
-    ReadLease& operator=(const ReadLease&) = delete;
-    Connection& operator*() const { return *connection_; }
+    Connection& operator*() const { return *lease_.connection(); }
 
    private:
-    const SqliteStore& store_;
-    std::unique_ptr<Connection> connection_;
+    mutable ConnectionPool<Connection>::Lease lease_;
   };
 
   // The writer connection; the caller holds write_mutex_. Throws for a read-only store.
@@ -63,8 +62,7 @@ class SqliteStore final : public TextureStore {
   int schema_version_ = kSchemaVersion;
   std::mutex write_mutex_;
   std::unique_ptr<Connection> writer_;  // null when read-only
-  mutable std::mutex pool_mutex_;
-  mutable std::vector<std::unique_ptr<Connection>> pool_;
+  mutable ConnectionPool<Connection> pool_;  // idle readers
 };
 
 }  // namespace tessera::db::internal

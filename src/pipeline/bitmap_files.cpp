@@ -1,0 +1,42 @@
+#include <spdlog/spdlog.h>
+
+#include "tessera/core/error.h"
+#include "tessera/pipeline/stages.h"
+#include "tessera/texture/bitmap_export.h"
+
+namespace tessera::pipeline {
+
+void BitmapFiles::keep(std::optional<texture::PatchBitmap> built) {
+  if (!built) return;
+  texture::PatchBitmap& bitmap = *built;
+  timer_.add(bitmap.build_ms);
+  area_built_m2_ += bitmap.area_m2();
+  // Versions of one patch come in finalization order (the commit stage's): the newest wins.
+  const auto bytesOf = [](int width, int height) {
+    return 3 * static_cast<std::size_t>(width) * static_cast<std::size_t>(height);
+  };
+  if (const auto it = written_.find(bitmap.id); it != written_.end()) {
+    bitmap_bytes_ -= bytesOf(it->second.width, it->second.height);
+    written_.erase(it);
+  }
+  if (const auto it = unwritten_.find(bitmap.id); it != unwritten_.end()) {
+    bitmap_bytes_ -= bytesOf(it->second.grid.width, it->second.grid.height);
+    unwritten_.erase(it);
+  }
+  bitmap_bytes_ += bytesOf(bitmap.grid.width, bitmap.grid.height);
+  try {
+    written_.emplace(bitmap.id, texture::writeBitmapFiles(bitmap, out_dir_));
+  } catch (const core::Error& e) {  // kept, and tried again at the end
+    spdlog::error("patch {} version {}: {}; its bitmap stays in memory", bitmap.id, bitmap.version,
+                  e.what());
+    unwritten_.emplace(bitmap.id, std::move(bitmap));
+  }
+}
+
+void BitmapFiles::flush() {
+  for (auto it = unwritten_.begin(); it != unwritten_.end(); it = unwritten_.erase(it)) {
+    written_.emplace(it->first, texture::writeBitmapFiles(it->second, out_dir_));
+  }
+}
+
+}  // namespace tessera::pipeline

@@ -1,0 +1,53 @@
+#pragma once
+// What one `tessera run` builds: its stages, the texture database and the graph's view of them
+// (run_stages.h), and the two steps after the graph: summing up the run and exporting the map.
+#include <cstdint>
+#include <filesystem>
+#include <memory>
+#include <optional>
+#include <vector>
+
+#include "internal/run_stages.h"
+#include "tessera/db/texture_store.h"
+#include "tessera/pipeline/run.h"
+#include "tessera/reuse/store_catalog.h"
+
+namespace tessera::pipeline::internal {
+
+// Members are built in the order they are declared, each from those above it.
+struct RunParts {
+  RunParts(core::FrameSource& input, const RunConfig& config, const RunOptions& options);
+  RunParts(const RunParts&) = delete;
+  RunParts& operator=(const RunParts&) = delete;
+
+  core::FrameSource& source;
+  // Finalized patches' colour samples wait here while out of memory; removed at the end.
+  std::filesystem::path sample_dir;
+  SourceStage source_stage;
+  // Tracked poses with loop closure on: closes loops on its own thread, fed with keyframes.
+  std::unique_ptr<loop::LoopCloser> loop_closer;
+  TrackingStage tracking;
+  IntegrationStage integration;
+  PlaneStage planes;
+  BitmapFiles bitmaps;
+  StatsSink sink;
+  std::unique_ptr<db::TextureStore> store;
+  std::int64_t run_id;
+  reuse::StoreCatalog catalog;
+  DescribeStage describe;
+  CommitStage commit;
+  RunStages stages;  // the graph's view of the stages above
+};
+
+// The run's figures once the graph is done (wall_s: the graph's time); also finishes loop
+// closure and writes OUT/trajectory_closed.txt when it ran.
+RunSummary summariseRun(RunParts& parts, const RunOptions& options, double wall_s);
+
+// Writes the map: OUT/mesh.ply, the bitmaps still in memory, the database textures the map
+// shows, patches.obj/json, map.obj and map.glb; adds their figures to `summary`.
+void exportRun(RunParts& parts, const RunOptions& options, RunSummary& summary);
+
+// The p-quantile (nearest rank) of `values`; nothing when there are none.
+std::optional<double> percentile(std::vector<double> values, double p);
+
+}  // namespace tessera::pipeline::internal

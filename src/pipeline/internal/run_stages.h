@@ -1,0 +1,54 @@
+#pragma once
+// `tessera run`'s stages as the flow graph calls them (flow_graph.h): each call goes to the one
+// stage that does the work. The commit also keeps the patch's bitmap and sums the run's totals
+// for the report.
+#include "tessera/pipeline/flow_graph.h"
+
+namespace tessera::pipeline::internal {
+
+class RunStages : public FramePath, public PatchPath, public RunReport {
+ public:
+  RunStages(SourceStage& source, TrackingStage& tracking, IntegrationStage& integration,
+            PlaneStage& planes, const DescribeStage& describe, CommitStage& commit,
+            BitmapFiles& bitmaps, StatsSink& sink)
+      : source_(source),
+        tracking_(tracking),
+        integration_(integration),
+        planes_(planes),
+        describe_(describe),
+        commit_(commit),
+        bitmaps_(bitmaps),
+        sink_(sink) {}
+
+  std::optional<core::Frame> next() override { return source_.next(); }
+  TrackedFrame track(core::Frame frame) override { return tracking_.process(std::move(frame)); }
+  FusedFrame integrate(TrackedFrame tracked) override {
+    return integration_.process(std::move(tracked));
+  }
+  FusedFrame findPlanes(FusedFrame fused) override { return planes_.process(std::move(fused)); }
+  std::vector<planes::PatchEvent> finishStream(
+      std::vector<planes::PatchSnapshot>& finalized) override {
+    return planes_.finishStream(finalized);
+  }
+
+  DescribedPatch describe(const PatchJob& job) const override { return describe_.process(job); }
+  std::optional<CommitMessage> commit(DescribedPatch described) override;
+
+  void frameDone(const FusedFrame& fused) override { sink_.process(fused); }
+  void committed(const CommitMessage& commit) override { sink_.writeCommit(commit); }
+  void patchEvents(const std::vector<planes::PatchEvent>& events) override {
+    sink_.writePatchEvents(events);
+  }
+
+ private:
+  SourceStage& source_;
+  TrackingStage& tracking_;
+  IntegrationStage& integration_;
+  PlaneStage& planes_;
+  const DescribeStage& describe_;
+  CommitStage& commit_;
+  BitmapFiles& bitmaps_;
+  StatsSink& sink_;
+};
+
+}  // namespace tessera::pipeline::internal

@@ -1,0 +1,240 @@
+#include <unistd.h>
+
+#include <chrono>
+#include <fstream>
+
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+#include <nlohmann/json.hpp>
+
+#include "tessera/core/error.h"
+#include "tessera/core/trajectory.h"
+#include "tessera/pipeline/stages.h"
+#include "tessera/pipeline/texture_db_stages.h"
+
+namespace tessera::pipeline {
+
+namespace {
+
+// The process's resident memory now (/proc/self/statm: pages), MB; 0 where it cannot be read.
+double residentMb() {
+  std::ifstream statm("/proc/self/statm");
+  std::size_t total_pages = 0, resident_pages = 0;
+  if (!(statm >> total_pages >> resident_pages)) return 0.0;
+  return static_cast<double>(resident_pages) * static_cast<double>(sysconf(_SC_PAGESIZE)) / 1e6;
+}
+
+}  // namespace
+
+std::optional<double> StatsSink::rssGrowthMbPer1000Frames() const {
+  const std::size_t n = rss_mb_.size();
+  if (n < 200) return std::nullopt;
+  // Least-squares slope of RSS against the frame count over the second half.
+  double sx = 0, sy = 0, sxx = 0, sxy = 0, m = 0;
+  for (std::size_t i = n / 2; i < n; ++i, ++m) {
+    const auto x = static_cast<double>(i);
+    sx += x;
+    sy += rss_mb_[i];
+    sxx += x * x;
+    sxy += x * rss_mb_[i];
+  }
+  const double denominator = m * sxx - sx * sx;
+  if (denominator <= 0.0) return std::nullopt;
+  return 1000.0 * (m * sxy - sx * sy) / denominator;
+}
+
+StatsSink::StatsSink(const std::filesystem::path& out_dir, std::optional<std::size_t> frames_total,
+                     ProgressCallback on_progress, std::function<std::size_t()> bitmap_bytes)
+    : stats_path_(out_dir / "stats.jsonl"),
+      trajectory_path_(out_dir / "trajectory.txt"),
+      stats_(stats_path_),
+      trajectory_(trajectory_path_),
+      frames_total_(frames_total),
+      on_progress_(std::move(on_progress)),
+      bitmap_bytes_(std::move(bitmap_bytes)),
+      start_(std::chrono::steady_clock::now()) {
+  for (const auto& [file, path] :
+       {std::pair{&stats_, &stats_path_}, {&trajectory_, &trajectory_path_}}) {
+    if (!*file) throw core::Error(fmt::format("{}: cannot be created", path->string()));
+  }
+  trajectory_ << "# camera poses T_W_C of the map (tracked, corrected against the planes): "
+                 "timestamp tx ty tz qx qy qz qw\n";
+}
+
+void StatsSink::process(const FusedFrame& fused) {
+  ScopedStageTime time(timer_);
+  if (fused.frame.source_interrupted) {
+    ++interruptions_;
+    if (!write_failed_) {
+      stats_ << nlohmann::json{{"type", "source"},
+                               {"event", "interrupted"},
+                               {"frames_done", frames_done_}}
+                    .dump()
+             << '\n';
+      writePatchEvents(fused.patch_events);
+    }
+    return;
+  }
+  ++frames_done_;
+  if (fused.latency_ms) latencies_ms_.push_back(*fused.latency_ms);
+  // The map's pose of the frame: corrected against the patches when the plane stage did so.
+  const std::optional<core::Isometry> pose = fused.T_W_C_planes ? fused.T_W_C_planes : fused.T_W_C;
+  if (pose) estimate_[fused.frame.timestamp_ns] = *pose;
+  if (fused.frame.T_W_C_gt) ground_truth_[fused.frame.timestamp_ns] = *fused.frame.T_W_C_gt;
+  const std::size_t bitmap_bytes = bitmap_bytes_ ? bitmap_bytes_() : 0;
+  map_bytes_ = fused.tsdf_bytes + bitmap_bytes;
+  rss_mb_.push_back(residentMb());
+  const double elapsed_s =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+
+  if (!write_failed_) {
+    nlohmann::json line = {{"type", "frame"},
+                           {"index", fused.frame.index},
+                           {"timestamp_ns", fused.frame.timestamp_ns},
+                           {"elapsed_s", elapsed_s},
+                           {"integrated", fused.integrated},
+                           {"tracking_ms", fused.tracking_ms},
+                           {"integration_ms", fused.integration_ms},
+                           {"tsdf_bytes", fused.tsdf_bytes},
+                           {"tsdf_blocks_released", fused.tsdf_blocks_released},
+                           {"bitmap_bytes", bitmap_bytes},
+                           {"map_bytes", map_bytes_},
+                           {"rss_mb", rss_mb_.back()},
+                           {"planes_ms", fused.planes_ms},
+                           {"planes_detected", fused.planes_detected},
+                           {"patches_live", fused.patches_live},
+                           {"patches_finalized", fused.patches_finalized},
+                           {"textures_stored", textures_stored_}};
+    if (!fused.integrated) line["skip_reason"] = fused.skip_reason;
+    if (fused.latency_ms) line["latency_ms"] = *fused.latency_ms;
+    if (fused.colour_gain) {
+      line["colour_gain"] = {(*fused.colour_gain)[0], (*fused.colour_gain)[1],
+                             (*fused.colour_gain)[2]};
+    }
+    stats_ << line.dump() << '\n';
+    writePatchEvents(fused.patch_events);
+    if (pose) trajectory_ << core::tumLine(fused.frame.timestamp_ns, *pose);
+    if (!stats_ || !trajectory_) {
+      write_failed_ = true;
+      spdlog::error("{}: writing failed (disk full?); no further stats lines",
+                    stats_path_.string());
+    }
+  }
+  if (monitor_ != nullptr) {
+    MonitorFrame frame;
+    frame.elapsed_s = elapsed_s;
+    frame.frames_done = frames_done_;
+    frame.frames_total = frames_total_;
+    frame.frames_dropped = frames_dropped_ ? frames_dropped_() : 0;
+    frame.latency_ms = fused.latency_ms;
+    frame.tracking_ms = fused.tracking_ms;
+    frame.integration_ms = fused.integration_ms;
+    frame.planes_ms = fused.planes_ms;
+    frame.tsdf_bytes = fused.tsdf_bytes;
+    frame.bitmap_bytes = bitmap_bytes;
+    frame.map_bytes = map_bytes_;
+    frame.patches_live = fused.patches_live;
+    frame.patches_finalized = fused.patches_finalized;
+    monitor_->onFrame(frame);
+  }
+  if (on_progress_) {
+    on_progress_({frames_done_, frames_total_, elapsed_s, map_bytes_, fused.latency_ms});
+  }
+}
+
+void StatsSink::attachMonitor(MapMonitor* monitor, std::function<std::size_t()> frames_dropped) {
+  monitor_ = monitor;
+  frames_dropped_ = std::move(frames_dropped);
+}
+
+void StatsSink::writePatchEvents(const std::vector<planes::PatchEvent>& events) {
+  for (const planes::PatchEvent& event : events) {
+    const bool finalized = event.kind == planes::PatchEvent::Kind::kFinalized;
+    nlohmann::json line = {{"type", "patch"},
+                           {"event", finalized ? "finalized" : "retired"},
+                           {"id", event.id},
+                           {"version", event.version},
+                           {"frames_done", frames_done_}};
+    if (finalized) line["area_m2"] = event.area_m2;
+    stats_ << line.dump() << '\n';
+  }
+}
+
+void StatsSink::writeCommit(const CommitMessage& message) {
+  const CommitRecord& record = message.record;
+  const std::size_t batch = message.batch.index, batch_size = message.batch.size;
+  const std::uint64_t frame_index = message.batch.frame_index;
+  const std::size_t textures_stored = message.totals.textures_stored;
+  if (monitor_ != nullptr) {
+    MonitorCommit commit = message.totals;
+    commit.committed = record.instance.has_value();
+    commit.reused = record.instance && record.instance->reused;
+    commit.bitmap_ms = record.bitmap_ms;
+    commit.match_ms = record.match_ms;
+    commit.commit_latency_ms = record.commit_latency_ms;
+    commit.ccv_considered = record.ccv_considered;
+    commit.ccv_removed = record.ccv_removed;
+    monitor_->onCommit(commit);
+  }
+  textures_stored_ = textures_stored;
+  BatchCounts& counts = batches_[batch];
+  counts.patches += 1;
+  counts.considered += record.ccv_considered;
+  counts.removed += record.ccv_removed;
+  const bool reused = record.instance && record.instance->reused;
+  counts.reuses += reused ? 1 : 0;
+  if (write_failed_) return;
+  if (record.patch_id != 0 || record.instance) {
+    nlohmann::json line = {{"type", "patch"},
+                           {"event", "committed"},
+                           {"id", record.patch_id},
+                           {"version", record.version},
+                           {"frame", frame_index},
+                           {"committed", record.instance.has_value()},
+                           {"method", record.method},
+                           {"ccv_considered", record.ccv_considered},
+                           {"ccv_removed", record.ccv_removed},
+                           {"bitmap_ms", record.bitmap_ms},
+                           {"describe_ms", record.describe_ms},
+                           {"match_ms", record.match_ms},
+                           {"pattern_ms", record.pattern_ms},
+                           {"commit_latency_ms", record.commit_latency_ms},
+                           {"textures_stored", textures_stored}};
+    if (record.instance) {
+      const core::Similarity2& s = record.instance->transform;
+      line["texture_id"] = record.instance->texture_id;
+      line["reused"] = reused;
+      line["transform"] = {s.a, s.b, s.tx, s.ty};
+      line["psnr_db"] = record.instance->psnr_db ? nlohmann::json(*record.instance->psnr_db)
+                                                 : nlohmann::json(nullptr);
+      nlohmann::json overlays = nlohmann::json::array();
+      for (const db::TextureInstance& overlay : record.overlays) {
+        overlays.push_back({{"texture_id", overlay.texture_id}, {"reused", overlay.reused}});
+      }
+      line["overlays"] = overlays;
+    }
+    stats_ << line.dump() << '\n';
+  }
+  if (counts.patches == batch_size) {
+    stats_ << nlohmann::json{{"type", "match"},
+                             {"frame", frame_index},
+                             {"patches", counts.patches},
+                             {"ccv_considered", counts.considered},
+                             {"ccv_removed", counts.removed},
+                             {"reuses", counts.reuses}}
+                  .dump()
+           << '\n';
+    batches_.erase(batch);
+  }
+}
+
+void StatsSink::flush() {
+  stats_.close();
+  trajectory_.close();
+  if (write_failed_ || stats_.fail() || trajectory_.fail()) {
+    throw core::Error(fmt::format("{} or {}: could not be written completely (disk full?)",
+                                  stats_path_.string(), trajectory_path_.string()));
+  }
+}
+
+}  // namespace tessera::pipeline

@@ -1,0 +1,228 @@
+// The flow graph alone, with fake stages that sleep seeded random times: every serial stage sees
+// the frames in stream order, patches are committed in the order they were finalized (the
+// end-of-stream patches last), each batch's commits all reach the report, the report is never
+// called by two threads at once, and no more frames are in flight than the limiter allows;
+// for 1, 2 and 4 threads.
+#include "tessera/pipeline/flow_graph.h"
+
+#include <atomic>
+#include <chrono>
+#include <map>
+#include <mutex>
+#include <random>
+#include <thread>
+
+#include <gtest/gtest.h>
+
+namespace tessera::pipeline {
+namespace {
+
+// Sleeps up to `max_us`, drawn from `random`.
+void nap(std::mt19937& random, int max_us) {
+  std::this_thread::sleep_for(
+      std::chrono::microseconds(std::uniform_int_distribution<int>(0, max_us)(random)));
+}
+
+planes::PatchSnapshot patch(int id) {
+  planes::PatchSnapshot snapshot;
+  snapshot.id = id;
+  snapshot.version = 1;
+  return snapshot;
+}
+
+constexpr int kFrames = 60;
+constexpr int kInFlight = 3;
+
+// Frames 0..kFrames-1. Every third frame finalizes one or two patches; every tenth retires the
+// oldest patch not yet retired. The end of the stream finalizes three more and retires one.
+class FakeFrames : public FramePath {
+ public:
+  std::optional<core::Frame> next() override {
+    nap(source_random_, 300);
+    if (read_ == kFrames) return std::nullopt;
+    core::Frame frame;
+    frame.index = static_cast<std::uint64_t>(read_++);
+    frame.timestamp_ns = static_cast<std::int64_t>(frame.index) * 33'000'000;
+    max_in_flight = std::max(max_in_flight.load(), ++in_flight);
+    return frame;
+  }
+  TrackedFrame track(core::Frame frame) override {
+    nap(track_random_, 800);
+    out_of_order += frame.index != tracked_++ ? 1 : 0;
+    return {std::move(frame), core::Isometry::Identity(), {}, 0.0, {}};
+  }
+  FusedFrame integrate(TrackedFrame tracked) override {
+    nap(integrate_random_, 800);
+    out_of_order += tracked.frame.index != integrated_++ ? 1 : 0;
+    FusedFrame fused;
+    fused.frame = std::move(tracked.frame);
+    fused.integrated = true;
+    return fused;
+  }
+  FusedFrame findPlanes(FusedFrame fused) override {
+    nap(planes_random_, 800);
+    const std::uint64_t index = fused.frame.index;
+    out_of_order += index != planned_++ ? 1 : 0;
+    if (index % 10 == 9 && retired_ < next_id_) {
+      fused.patch_events.push_back({planes::PatchEvent::Kind::kRetired, retired_, 1});
+      finalization_order.push_back(-retired_++);
+    }
+    if (index % 3 == 0) {
+      for (std::uint64_t i = 0; i < 1 + index % 2; ++i) {
+        fused.finalized_patches.push_back(patch(next_id_));
+        finalization_order.push_back(next_id_);
+        batch_of_patch[next_id_++] = index;
+      }
+    }
+    return fused;
+  }
+  std::vector<planes::PatchEvent> finishStream(
+      std::vector<planes::PatchSnapshot>& finalized) override {
+    std::vector<planes::PatchEvent> events{{planes::PatchEvent::Kind::kRetired, retired_, 1}};
+    finalization_order.push_back(-retired_++);
+    for (int i = 0; i < 3; ++i) {
+      finalized.push_back(patch(next_id_));
+      finalization_order.push_back(next_id_);
+      batch_of_patch[next_id_++] = kFrames;  // the end's batch: after the last frame
+    }
+    return events;
+  }
+
+  std::atomic<int> in_flight{0}, max_in_flight{0}, out_of_order{0};
+  std::vector<int> finalization_order;  // patch ids; a retirement as -id
+  std::map<int, std::uint64_t> batch_of_patch;
+
+ private:
+  std::mt19937 source_random_{1}, track_random_{2}, integrate_random_{3}, planes_random_{4};
+  int read_ = 0;
+  std::uint64_t tracked_ = 0, integrated_ = 0, planned_ = 0;
+  int next_id_ = 1, retired_ = 1;
+};
+
+class FakePatches : public PatchPath {
+ public:
+  DescribedPatch describe(const PatchJob& job) const override {
+    std::mt19937 random(static_cast<unsigned>(job.sequence) + 7);
+    nap(random, 3000);  // many at once, finishing out of order
+    DescribedPatch described;
+    described.sequence = job.sequence;
+    described.retired = job.retired;
+    described.batch = job.batch;
+    described.batch_size = job.batch_size;
+    described.frame_index = job.frame_index;
+    if (!job.retired) {
+      described.bitmap.emplace();
+      described.bitmap->id = job.patch.id;
+    }
+    return described;
+  }
+  std::optional<CommitMessage> commit(DescribedPatch described) override {
+    out_of_order += described.sequence != committed_++ ? 1 : 0;
+    if (described.retired) {
+      commit_order.push_back(-*described.retired);
+      return std::nullopt;
+    }
+    commit_order.push_back(described.bitmap->id);
+    CommitMessage message;
+    message.record.patch_id = described.bitmap->id;
+    message.batch = described.batchInfo();
+    return message;
+  }
+
+  std::atomic<int> out_of_order{0};
+  std::vector<int> commit_order;
+
+ private:
+  std::size_t committed_ = 0;
+};
+
+class FakeReport : public RunReport {
+ public:
+  explicit FakeReport(FakeFrames& frames) : frames_(frames) {}
+
+  void frameDone(const FusedFrame& fused) override {
+    Alone alone(*this);
+    --frames_.in_flight;
+    out_of_order += fused.frame.index != reported_++ ? 1 : 0;
+  }
+  void committed(const CommitMessage& commit) override {
+    Alone alone(*this);
+    reported_commits.push_back(commit.record.patch_id);
+    Batch& batch = batches[commit.batch.index];
+    batch.size = commit.batch.size;
+    batch.frame_index = commit.batch.frame_index;
+    batch.patches.push_back(commit.record.patch_id);
+  }
+  void patchEvents(const std::vector<planes::PatchEvent>& events) override {
+    Alone alone(*this);
+    end_events += events.size();
+  }
+
+  struct Batch {
+    std::size_t size = 0;
+    std::uint64_t frame_index = 0;
+    std::vector<int> patches;
+  };
+  std::atomic<int> out_of_order{0}, overlaps{0};
+  std::vector<int> reported_commits;
+  std::map<std::size_t, Batch> batches;
+  std::size_t end_events = 0;
+
+ private:
+  // Counts a call that began while another was still running.
+  struct Alone {
+    explicit Alone(FakeReport& report) : report_(report) {
+      if (report_.busy_.exchange(true)) ++report_.overlaps;
+    }
+    ~Alone() { report_.busy_ = false; }
+    FakeReport& report_;
+  };
+  FakeFrames& frames_;
+  std::uint64_t reported_ = 0;
+  std::atomic<bool> busy_{false};
+};
+
+class FlowGraphTest : public ::testing::TestWithParam<int> {};
+
+TEST_P(FlowGraphTest, KeepsOrderBatchesAndBackPressureAndFlushesAtTheEnd) {
+  FakeFrames frames;
+  FakePatches patches;
+  FakeReport report(frames);
+  const std::size_t reported = runGraph(frames, patches, report, {GetParam(), kInFlight});
+
+  EXPECT_EQ(reported, static_cast<std::size_t>(kFrames));
+  EXPECT_EQ(frames.out_of_order, 0) << "a serial frame stage saw frames out of order";
+  EXPECT_EQ(report.out_of_order, 0) << "the report saw frames out of order";
+  EXPECT_EQ(patches.out_of_order, 0) << "commits out of finalization order";
+  EXPECT_EQ(report.overlaps, 0) << "two threads in the report at once";
+  // The source may hold one frame it read and the limiter has not admitted yet.
+  EXPECT_LE(frames.max_in_flight, kInFlight + 1);
+  EXPECT_EQ(frames.in_flight, 0);
+
+  // Every patch and retirement, end of stream included, committed in finalization order.
+  EXPECT_EQ(patches.commit_order, frames.finalization_order);
+  std::vector<int> finalized;
+  for (int id : frames.finalization_order) {
+    if (id > 0) finalized.push_back(id);
+  }
+  EXPECT_EQ(report.reported_commits, finalized);
+  EXPECT_EQ(report.end_events, 1u);
+
+  // Each batch: the patches one frame finalized, all reported, named with that frame.
+  std::size_t patches_in_batches = 0;
+  for (const auto& [index, batch] : report.batches) {
+    EXPECT_EQ(batch.patches.size(), batch.size) << "batch " << index;
+    for (int id : batch.patches) EXPECT_EQ(frames.batch_of_patch.at(id), batch.frame_index);
+    patches_in_batches += batch.patches.size();
+  }
+  EXPECT_EQ(patches_in_batches, finalized.size());
+  ASSERT_FALSE(report.batches.empty());
+  EXPECT_EQ(report.batches.rbegin()->second.frame_index, static_cast<std::uint64_t>(kFrames));
+  EXPECT_EQ(report.batches.rbegin()->second.size, 3u);
+}
+
+INSTANTIATE_TEST_SUITE_P(Threads, FlowGraphTest, ::testing::Values(1, 2, 4),
+                         [](const auto& test) { return std::to_string(test.param) + "Threads"; });
+
+}  // namespace
+}  // namespace tessera::pipeline
