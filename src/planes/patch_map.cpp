@@ -4,7 +4,9 @@
 #include <cmath>
 #include <limits>
 #include <map>
+#include <stdexcept>
 
+#include <fmt/format.h>
 #include <Eigen/Geometry>
 
 #include <opencv2/core.hpp>
@@ -98,8 +100,11 @@ Cell TileGrid::keyOf(const Cell& cell) const {
 }
 
 Patch& PatchMap::patchWithId(int id) {
-  return *std::find_if(patches_.begin(), patches_.end(),
-                       [&](const Patch& p) { return p.id == id; });
+  const auto it =
+      std::find_if(patches_.begin(), patches_.end(), [&](const Patch& p) { return p.id == id; });
+  // Callers name patches the map holds: anything else is a bug, reported rather than undefined.
+  if (it == patches_.end()) throw std::logic_error(fmt::format("patch map: no patch {}", id));
+  return *it;
 }
 
 Patch& PatchMap::tileAt(int plane_id, const Cell& key) {

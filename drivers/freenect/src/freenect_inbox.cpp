@@ -43,8 +43,7 @@ std::int64_t DeviceClock::unwrap(std::uint32_t stamp) {
 }
 
 void FrameInbox::clear() {
-  depth.clear();
-  colour.clear();
+  clearFrames();
   clock = DeviceClock();
   lost = false;
   loss_code = 0;
@@ -68,30 +67,22 @@ void guarded(FrameInbox& inbox, bool is_depth, Take take) {
 }
 
 void takeDepth(FrameInbox& inbox, void* data, std::uint32_t timestamp) {
-  CapturedFrame frame;
+  core::CapturedImage frame;
   frame.arrival_ns = core::steadyNowNs();
   cv::Mat image = copyImage(data, CV_16UC1, inbox.depth_bytes);
   frame.image = inbox.depth_in_mm ? image : disparityImageToMm(image);
   std::lock_guard lock(inbox.mutex);
-  frame.ticks = inbox.clock.unwrap(timestamp);
-  ++inbox.delivered;
-  inbox.depth.push_back(std::move(frame));
-  while (inbox.depth.size() > inbox.depth_capacity) {
-    inbox.depth.pop_front();
-    ++inbox.dropped;
-  }
-  inbox.changed.notify_all();
+  frame.stamp = inbox.clock.unwrap(timestamp);
+  inbox.pushDepth(std::move(frame));
 }
 
 void takeColour(FrameInbox& inbox, void* data, std::uint32_t timestamp) {
-  CapturedFrame frame;
+  core::CapturedImage frame;
   frame.arrival_ns = core::steadyNowNs();
   frame.image = copyImage(data, CV_8UC3, inbox.colour_bytes);
   std::lock_guard lock(inbox.mutex);
-  frame.ticks = inbox.clock.unwrap(timestamp);
-  inbox.colour.push_back(std::move(frame));
-  while (inbox.colour.size() > inbox.colour_capacity) inbox.colour.pop_front();
-  inbox.changed.notify_all();
+  frame.stamp = inbox.clock.unwrap(timestamp);
+  inbox.pushColour(std::move(frame));
 }
 
 }  // namespace

@@ -221,30 +221,24 @@ core::ReadResult FreenectSource::nextFrame() {
     }
     return result;
   }
-  CapturedFrame depth = std::move(inbox_.depth.front());
+  core::CapturedImage depth = std::move(inbox_.depth.front());
   inbox_.depth.pop_front();
-  // The colour frame nearest in time; wait a little for it when it has not come yet.
-  inbox_.changed.wait_for(lock, 2 * kFramePeriod, [&] {
-    return inbox_.lost || (!inbox_.colour.empty() &&
-                           inbox_.colour.back().ticks + kPairingToleranceTicks >= depth.ticks);
-  });
-  const auto distance = [&](const CapturedFrame& c) { return std::llabs(c.ticks - depth.ticks); };
-  auto nearest =
-      std::min_element(inbox_.colour.begin(), inbox_.colour.end(),
-                       [&](const auto& a, const auto& b) { return distance(a) < distance(b); });
-  if (nearest == inbox_.colour.end() || distance(*nearest) > kPairingToleranceTicks) {
+  // The colour frame nearest in time, waited for a little when it has not come yet.
+  std::optional<core::CapturedImage> colour = inbox_.takeColourNear(
+      lock, depth.stamp, kPairingToleranceTicks,
+      std::chrono::duration_cast<std::chrono::microseconds>(2 * kFramePeriod));
+  if (!colour) {
     result.status = core::ReadStatus::kBadFrame;
     result.problem =
         fmt::format("{}: depth frame at {} ticks has no colour frame within {} ticks (60 MHz)",
-                    label_, depth.ticks, kPairingToleranceTicks);
+                    label_, depth.stamp, kPairingToleranceTicks);
     return result;
   }
   core::Frame& frame = result.frame;
-  frame.rgb = std::move(nearest->image);
-  inbox_.colour.erase(inbox_.colour.begin(), std::next(nearest));
+  frame.rgb = std::move(colour->image);
   lock.unlock();
   frame.index = frames_out_++;
-  frame.timestamp_ns = ticksToNs(depth.ticks);
+  frame.timestamp_ns = ticksToNs(depth.stamp);
   frame.arrival_ns = depth.arrival_ns;
   frame.depth_mm = std::move(depth.image);
   frame.intrinsics = intrinsics_;

@@ -5,8 +5,7 @@
 namespace tessera::drivers::openni2 {
 
 void FrameInbox::clear() {
-  depth.clear();
-  colour.clear();
+  clearFrames();
   lost = false;
   last_depth_index.reset();
 }
@@ -28,9 +27,9 @@ void InboxListener::onNewFrame(openni::VideoStream& stream) {
 void InboxListener::take(openni::VideoStream& stream) {
   openni::VideoFrameRef ref;
   if (stream.readFrame(&ref) != openni::STATUS_OK || !ref.isValid()) return;
-  CapturedFrame frame;
+  core::CapturedImage frame;
   frame.arrival_ns = core::steadyNowNs();
-  frame.timestamp_us = static_cast<std::int64_t>(ref.getTimestamp());
+  frame.stamp = static_cast<std::int64_t>(ref.getTimestamp());  // microseconds
   frame.device_index = ref.getFrameIndex();
   const int format = ref.getVideoMode().getPixelFormat();
   const cv::Mat view(ref.getHeight(), ref.getWidth(), is_depth_ ? CV_16UC1 : CV_8UC3,
@@ -49,18 +48,10 @@ void InboxListener::take(openni::VideoStream& stream) {
                            ? frame.device_index - *inbox_.last_depth_index - 1
                            : 0;
     inbox_.last_depth_index = frame.device_index;
-    inbox_.delivered += static_cast<std::size_t>(missed) + 1;
-    inbox_.dropped += static_cast<std::size_t>(missed);
-    inbox_.depth.push_back(std::move(frame));
-    while (inbox_.depth.size() > inbox_.depth_capacity) {
-      inbox_.depth.pop_front();
-      ++inbox_.dropped;
-    }
+    inbox_.pushDepth(std::move(frame), static_cast<std::size_t>(missed));
   } else {
-    inbox_.colour.push_back(std::move(frame));
-    while (inbox_.colour.size() > inbox_.colour_capacity) inbox_.colour.pop_front();
+    inbox_.pushColour(std::move(frame));
   }
-  inbox_.changed.notify_all();
 }
 
 void DisconnectWatch::watch(const std::string& uri) {

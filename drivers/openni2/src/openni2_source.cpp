@@ -308,39 +308,29 @@ core::ReadResult OpenNi2Source::State::nextFrame() {
                                               deviceLabel(uri), options.frame_timeout_ms);
     return result;
   }
-  CapturedFrame depth = std::move(inbox.depth.front());
+  core::CapturedImage depth = std::move(inbox.depth.front());
   inbox.depth.pop_front();
-  // The colour frame nearest in time; wait a little for it when it has not come yet.
-  const auto has_later_colour = [&] {
-    return inbox.lost || (!inbox.colour.empty() &&
-                          inbox.colour.back().timestamp_us + tolerance_us >= depth.timestamp_us);
-  };
-  inbox.changed.wait_for(lock, std::chrono::microseconds(2 * period_us), has_later_colour);
-  auto nearest =
-      std::min_element(inbox.colour.begin(), inbox.colour.end(), [&](const auto& a, const auto& b) {
-        return std::llabs(a.timestamp_us - depth.timestamp_us) <
-               std::llabs(b.timestamp_us - depth.timestamp_us);
-      });
-  if (nearest == inbox.colour.end() ||
-      std::llabs(nearest->timestamp_us - depth.timestamp_us) > tolerance_us) {
+  // The colour frame nearest in time, waited for a little when it has not come yet.
+  std::optional<core::CapturedImage> colour = inbox.takeColourNear(
+      lock, depth.stamp, tolerance_us, std::chrono::microseconds(2 * period_us));
+  if (!colour) {
     result.status = core::ReadStatus::kBadFrame;
     result.problem = fmt::format("depth frame {} (t = {} us): no colour frame within {} us",
-                                 depth.device_index, depth.timestamp_us, tolerance_us);
+                                 depth.device_index, depth.stamp, tolerance_us);
     return result;
   }
   core::Frame& frame = result.frame;
-  frame.rgb = std::move(nearest->image);
-  inbox.colour.erase(inbox.colour.begin(), std::next(nearest));
+  frame.rgb = std::move(colour->image);
   lock.unlock();
   frame.index = frames_out++;
   // A reconnected device may restart its clock: later sessions continue after the last
   // timestamp, so that the trajectory and the stats stay in order.
   if (session_start_pending && last_timestamp_us &&
-      depth.timestamp_us + session_offset_us <= *last_timestamp_us) {
-    session_offset_us = *last_timestamp_us + period_us - depth.timestamp_us;
+      depth.stamp + session_offset_us <= *last_timestamp_us) {
+    session_offset_us = *last_timestamp_us + period_us - depth.stamp;
   }
   session_start_pending = false;
-  last_timestamp_us = depth.timestamp_us + session_offset_us;
+  last_timestamp_us = depth.stamp + session_offset_us;
   frame.timestamp_ns = *last_timestamp_us * 1000;
   frame.arrival_ns = depth.arrival_ns;
   frame.depth_mm = std::move(depth.image);

@@ -1,39 +1,21 @@
 #pragma once
 // Frames as OpenNI2's threads hand them over, held for the reader of OpenNi2Source.
-#include <condition_variable>
-#include <cstdint>
-#include <deque>
-#include <mutex>
 #include <optional>
 #include <string>
 
 #include <OpenNI.h>
-#include <opencv2/core/mat.hpp>
+
+#include "tessera/core/frame_pairing.h"
 
 namespace tessera::drivers::openni2 {
 
-struct CapturedFrame {
-  std::int64_t timestamp_us = 0;  // device clock
-  std::int64_t arrival_ns = 0;    // host steady clock (core::steadyNowNs)
-  int device_index = 0;           // OpenNI2's frame number
-  cv::Mat image;                  // depth CV_16UC1 millimetres, or colour CV_8UC3 RGB
-};
-
-// Shared by OpenNI2's callback threads (writers) and the source's reader; every field is
-// guarded by `mutex`.
-struct FrameInbox {
-  std::mutex mutex;
-  std::condition_variable changed;
-  std::deque<CapturedFrame> depth;
-  std::deque<CapturedFrame> colour;
-  std::size_t depth_capacity = 2;   // a busy reader loses the oldest depth frames
-  std::size_t colour_capacity = 8;  // enough to pair with any depth frame still held
-  std::size_t delivered = 0;
-  std::size_t dropped = 0;
-  bool lost = false;                    // the device was unplugged
+// Shared by OpenNI2's callback threads (writers) and the source's reader, guarded by `mutex`.
+// Stamps are the device's microseconds, device_index OpenNI2's frame number; `lost`: the
+// device was unplugged.
+struct FrameInbox : core::PairingInbox {
   std::optional<int> last_depth_index;  // this connection's last depth frame number
 
-  void clear();
+  void clear();  // for a new connection
 };
 
 // Copies each new frame of one stream into the inbox (the usual OpenNI2 listener pattern).

@@ -1,0 +1,48 @@
+#include "tessera/core/frame_pairing.h"
+
+#include <algorithm>
+#include <cstdlib>
+#include <iterator>
+
+namespace tessera::core {
+
+void PairingInbox::pushDepth(CapturedImage frame, std::size_t missed) {
+  delivered += missed + 1;
+  dropped += missed;
+  depth.push_back(std::move(frame));
+  while (depth.size() > depth_capacity) {
+    depth.pop_front();
+    ++dropped;
+  }
+  changed.notify_all();
+}
+
+void PairingInbox::pushColour(CapturedImage frame) {
+  colour.push_back(std::move(frame));
+  while (colour.size() > colour_capacity) colour.pop_front();
+  changed.notify_all();
+}
+
+void PairingInbox::clearFrames() {
+  depth.clear();
+  colour.clear();
+}
+
+std::optional<CapturedImage> PairingInbox::takeColourNear(std::unique_lock<std::mutex>& lock,
+                                                          std::int64_t stamp,
+                                                          std::int64_t tolerance,
+                                                          std::chrono::microseconds wait) {
+  changed.wait_for(lock, wait, [&] {
+    return lost || (!colour.empty() && colour.back().stamp + tolerance >= stamp);
+  });
+  const auto distance = [&](const CapturedImage& c) { return std::llabs(c.stamp - stamp); };
+  const auto nearest = std::min_element(
+      colour.begin(), colour.end(),
+      [&](const CapturedImage& a, const CapturedImage& b) { return distance(a) < distance(b); });
+  if (nearest == colour.end() || distance(*nearest) > tolerance) return std::nullopt;
+  CapturedImage taken = std::move(*nearest);
+  colour.erase(colour.begin(), std::next(nearest));
+  return taken;
+}
+
+}  // namespace tessera::core
