@@ -10,31 +10,14 @@
 #include <gtest/gtest.h>
 #include <opencv2/imgproc.hpp>
 
+#include "support/random_shapes.h"
 #include "tessera/match/fidelity.h"
 
 namespace tessera::match {
 namespace {
 
-// Small shapes in a few random colours, densely over a plain ground: features everywhere and the
-// same statistics in every part (as a surface's texture has), so that a crop's colour coherence
-// is close to the whole's.
 cv::Mat texture(int width, int height, unsigned seed) {
-  std::mt19937 random(seed);
-  std::uniform_int_distribution<int> level(0, 255), x(0, width - 1), y(0, height - 1), size(3, 9);
-  const cv::Scalar ground(level(random), level(random), level(random));
-  std::vector<cv::Scalar> palette;
-  for (int i = 0; i < 4; ++i) palette.emplace_back(level(random), level(random), level(random));
-  cv::Mat image(height, width, CV_8UC3, ground);
-  for (int i = 0; i < width * height / 60; ++i) {
-    const cv::Scalar c = palette[static_cast<std::size_t>(i) % palette.size()];
-    const cv::Point p(x(random), y(random));
-    if (i % 2 == 0) {
-      cv::circle(image, p, size(random), c, cv::FILLED, cv::LINE_AA);
-    } else {
-      cv::rectangle(image, p, p + cv::Point(size(random), size(random)), c, cv::FILLED);
-    }
-  }
-  return image;
+  return test::randomShapes(width, height, seed);
 }
 
 std::shared_ptr<StoredTexture> stored(std::int64_t id, const cv::Mat& rgb, bool pattern,

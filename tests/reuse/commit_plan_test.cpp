@@ -11,6 +11,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "pattern/pattern_test_support.h"
+#include "support/random_shapes.h"
 #include "tessera/match/fidelity.h"
 #include "tessera/pattern/pattern_extractor.h"
 #include "tessera/reuse/layer_plan.h"
@@ -18,25 +19,8 @@
 namespace tessera::reuse {
 namespace {
 
-// Small shapes in a few random colours over a plain ground: features everywhere and the same
-// colour statistics in every part, as a surface's texture has.
 cv::Mat shapes(int width, int height, unsigned seed) {
-  std::mt19937 random(seed);
-  std::uniform_int_distribution<int> level(0, 255), x(0, width - 1), y(0, height - 1), size(3, 9);
-  const cv::Scalar ground(level(random), level(random), level(random));
-  std::vector<cv::Scalar> palette;
-  for (int i = 0; i < 4; ++i) palette.emplace_back(level(random), level(random), level(random));
-  cv::Mat image(height, width, CV_8UC3, ground);
-  for (int i = 0; i < width * height / 60; ++i) {
-    const cv::Scalar c = palette[static_cast<std::size_t>(i) % palette.size()];
-    const cv::Point p(x(random), y(random));
-    if (i % 2 == 0) {
-      cv::circle(image, p, size(random), c, cv::FILLED, cv::LINE_AA);
-    } else {
-      cv::rectangle(image, p, p + cv::Point(size(random), size(random)), c, cv::FILLED);
-    }
-  }
-  return image;
+  return test::randomShapes(width, height, seed);
 }
 
 // A patch's bitmap with every texel observed.
