@@ -1,4 +1,4 @@
-// The measurements behind the tracking and TSDF choices in docs/ARCHITECTURE.md. Every option
+// The measurements behind the tracking and TSDF choices in docs/MEASUREMENTS.md. Every option
 // runs over the same frames, held in memory so decoding is not timed:
 //   - TSDF integration at ground-truth poses: Open3D's ScalableTSDFVolume (legacy) and
 //     VoxelBlockGrid (tensor, CPU), at full and half depth resolution, plus VoxelBlockGrid's

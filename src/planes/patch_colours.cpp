@@ -1,5 +1,5 @@
 // PatchMap::addColours: colour samples from one frame for the patches its regions went to
-// (docs/ARCHITECTURE.md, "Textures: bitmaps of the finalized patches").
+// (docs/MEASUREMENTS.md, "Textures: bitmaps of the finalized patches").
 #include <algorithm>
 #include <cmath>
 

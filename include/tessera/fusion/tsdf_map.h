@@ -16,7 +16,7 @@ namespace tessera::fusion {
 
 struct TsdfConfig {
   // 2 cm: the TSDF is geometry only (textures come from the raw colour frames), and 1 cm costs
-  // 3-5x the integration time and 4x the memory (measurements in docs/ARCHITECTURE.md).
+  // 3-5x the integration time and 4x the memory (measurements in docs/MEASUREMENTS.md).
   double voxel_size_m = 0.02;  // edge of one voxel
   double truncation_m = 0.06;  // TSDF truncation distance (a few voxels)
   double min_depth_m = 0.3;    // depth below this is ignored (Kinect v1 minimum ~0.4 m)

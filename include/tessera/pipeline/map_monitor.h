@@ -3,7 +3,7 @@
 // the progress line, the HTTP monitor (/metrics, /stats, /events) and its page. Writers are the
 // stats sink (once per frame) and the commit node (once per patch); each update is a few
 // assignments under a mutex that no reader holds for longer than a copy, so watching never
-// slows the stream (docs/ARCHITECTURE.md, "Watching a run").
+// slows the stream (docs/MEASUREMENTS.md, "Watching a run").
 #include <chrono>
 #include <condition_variable>
 #include <cstddef>

@@ -3,7 +3,7 @@
 // the plane is cut into small cells and each cell blends every sample that falls into it (a
 // running weighted mean of colour and position), so a texel averages many views instead of
 // keeping the one or two heaviest. On real cameras neighbouring cells kept from different
-// frames differ in exposure and white balance; blended cells do not (docs/ARCHITECTURE.md,
+// frames differ in exposure and white balance; blended cells do not (docs/MEASUREMENTS.md,
 // "Textures on real cameras").
 #include <array>
 #include <cstddef>

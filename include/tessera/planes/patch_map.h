@@ -71,7 +71,7 @@ struct PatchMapConfig {
   // before blending (planes/exposure.h); the bitmap is brought back to the mean exposure of
   // the frames that coloured it. Off by default: it makes a uniform surface uniform, but each
   // real view keeps its own exposure, and the per-cell mean of the views that saw a cell fits
-  // them better (measured in docs/ARCHITECTURE.md, "Textures on real cameras").
+  // them better (measured in docs/MEASUREMENTS.md, "Textures on real cameras").
   bool exposure_compensation = false;
 };
 
