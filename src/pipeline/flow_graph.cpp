@@ -98,6 +98,11 @@ std::size_t runGraph(FramePath& frames, PatchPath& patches, RunReport& report,
         graph, flow::serial, [&](Numbered<TrackedFrame> tracked) {
           return Numbered<FusedFrame>{tracked.number, frames.integrate(std::move(tracked.item))};
         });
+    flow::sequencer_node<Numbered<FusedFrame>> to_loops(graph, numbered);
+    flow::function_node<Numbered<FusedFrame>, Numbered<FusedFrame>> loops_node(
+        graph, flow::serial, [&](Numbered<FusedFrame> fused) {
+          return Numbered<FusedFrame>{fused.number, frames.closeLoops(std::move(fused.item))};
+        });
     flow::sequencer_node<Numbered<FusedFrame>> to_planes(graph, numbered);
     // The plane stage sends the frame on to the report and each patch it finalized (or
     // retired) to the patch path, numbered in the order it happened.
@@ -154,7 +159,9 @@ std::size_t runGraph(FramePath& frames, PatchPath& patches, RunReport& report,
     flow::make_edge(to_tracking, tracking_node);
     flow::make_edge(tracking_node, to_integration);
     flow::make_edge(to_integration, integration_node);
-    flow::make_edge(integration_node, to_planes);
+    flow::make_edge(integration_node, to_loops);
+    flow::make_edge(to_loops, loops_node);
+    flow::make_edge(loops_node, to_planes);
     flow::make_edge(to_planes, planes_node);
     flow::make_edge(flow::output_port<0>(planes_node), to_report);
     flow::make_edge(to_report, flow::input_port<0>(report_input));

@@ -45,10 +45,10 @@ RunParts::RunParts(core::FrameSource& input, const RunConfig& config, const RunO
       loop_closer(config.loop_closure.enabled && options.poses == PoseSource::kTrack
                       ? std::make_unique<loop::LoopCloser>(config.loop_closure)
                       : nullptr),
-      tracking(config.tracker, options.poses, loop_closer.get()),
+      tracking(config.tracker, options.poses),
       integration(config.tsdf, options.threads > 0 ? options.threads : defaultThreadCount(),
                   options.holdout_every),
-      planes(config.planes, config.patches, alignmentFor(config, options), loop_closer.get()),
+      planes(config.planes, config.patches, alignmentFor(config, options), loop_closer != nullptr),
       bitmaps(options.out_dir),
       sink(options.out_dir, framesTotal(input, options), options.on_progress,
            [this] { return bitmaps.bitmapBytes(); }),
@@ -57,7 +57,8 @@ RunParts::RunParts(core::FrameSource& input, const RunConfig& config, const RunO
       catalog(*store, config.match),
       describe(config.textures, config.match, config.pattern),
       commit(*store, catalog, {config.match, config.pattern, run_id}),
-      stages(source_stage, tracking, integration, planes, describe, commit, bitmaps, sink) {
+      stages(source_stage, tracking, integration, planes, describe, commit, bitmaps, sink,
+             loop_closer.get()) {
   planes.spillSamplesTo(sample_dir);
   if (options.monitor != nullptr) {
     sink.attachMonitor(options.monitor, [this] { return source_stage.framesDroppedSoFar(); });

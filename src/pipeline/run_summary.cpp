@@ -79,7 +79,7 @@ RunSummary summariseRun(RunParts& parts, const RunOptions& options, double wall_
     summary.loop_planes_moved = parts.planes.planesMovedByLoops();
     summary.loop_planes_merged = parts.planes.planesMergedByLoops();
     summary.loop_instances_retired = parts.commit.retirements();
-    summary.loop_wait_s = parts.planes.loopWaitS();
+    summary.loop_wait_s = parts.stages.loopWaitS();
     const core::Trajectory closed = graph.correct(parts.sink.estimate());
     core::writeTumTrajectory(closed, options.out_dir / "trajectory_closed.txt");
     summary.ate_after_closure = core::absoluteTrajectoryError(closed, parts.sink.groundTruth());

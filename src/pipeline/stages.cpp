@@ -74,12 +74,12 @@ std::optional<core::Frame> SourceStage::read() {
   return std::nullopt;
 }
 
-TrackingStage::TrackingStage(const fusion::TrackerConfig& tracker, PoseSource poses,
-                             loop::LoopCloser* loop_closer)
-    : tracker_(tracker), poses_(poses), loop_closer_(loop_closer) {}
+TrackingStage::TrackingStage(const fusion::TrackerConfig& tracker, PoseSource poses)
+    : tracker_(tracker), poses_(poses) {}
 
-std::optional<core::Isometry> TrackingStage::poseOf(const core::Frame& frame,
-                                                    std::string& problem) {
+std::optional<core::Isometry> TrackingStage::poseOf(
+    const core::Frame& frame, std::string& problem,
+    std::vector<std::shared_ptr<const fusion::KeyframeRecord>>& new_keyframes) {
   if (poses_ == PoseSource::kGroundTruth) {
     if (!frame.T_W_C_gt) problem = "no ground-truth pose (--poses gt)";
     return frame.T_W_C_gt;
@@ -93,10 +93,8 @@ std::optional<core::Isometry> TrackingStage::poseOf(const core::Frame& frame,
     problem = "tracking lost: " + tracked.problem;
     return std::nullopt;
   }
-  for (const auto& keyframe : tracked.new_keyframes) {
-    keyframe_ns_ = keyframe->timestamp_ns;
-    if (loop_closer_) loop_closer_->add(keyframe);
-  }
+  for (const auto& keyframe : tracked.new_keyframes) keyframe_ns_ = keyframe->timestamp_ns;
+  new_keyframes = tracked.new_keyframes;
   if (tracked.from_features) ++feature_poses_;
   if (tracked.status == fusion::TrackingStatus::kRelocalised) {
     ++relocalisations_;
@@ -123,7 +121,7 @@ TrackedFrame TrackingStage::process(core::Frame frame) {
     ScopedStageTime time(timer_);
     try {
       if (frame.colour_camera) frame = core::withRegisteredColour(std::move(frame));
-      tracked.T_W_C = poseOf(frame, tracked.skip_reason);
+      tracked.T_W_C = poseOf(frame, tracked.skip_reason, tracked.new_keyframes);
       tracked.keyframe_ns = keyframe_ns_;
     } catch (const core::Error& e) {
       tracked.T_W_C.reset();
@@ -158,6 +156,7 @@ FusedFrame IntegrationStage::process(TrackedFrame tracked) {
   FusedFrame fused;
   fused.T_W_C = tracked.T_W_C;
   fused.keyframe_ns = tracked.keyframe_ns;
+  fused.new_keyframes = std::move(tracked.new_keyframes);
   fused.skip_reason = std::move(tracked.skip_reason);
   fused.tracking_ms = tracked.tracking_ms;
   if (tracked.frame.source_interrupted) {
@@ -209,9 +208,8 @@ FusedFrame IntegrationStage::process(TrackedFrame tracked) {
 
 PlaneStage::PlaneStage(const planes::PlaneDetectorConfig& detector,
                        const planes::PatchMapConfig& patches,
-                       const planes::PlaneAlignmentConfig& alignment,
-                       loop::LoopCloser* loop_closer)
-    : detector_(detector), map_(patches), alignment_(alignment), loop_closer_(loop_closer) {}
+                       const planes::PlaneAlignmentConfig& alignment, bool follows_loops)
+    : detector_(detector), map_(patches), alignment_(alignment), follows_loops_(follows_loops) {}
 
 bool PlaneStage::wantsColours(std::uint64_t index, const core::Isometry& T_W_C) const {
   const auto every = static_cast<std::uint64_t>(map_.config().colour_every_n_frames);
@@ -261,14 +259,14 @@ FusedFrame PlaneStage::process(FusedFrame fused) {
   {
     ScopedStageTime time(timer_);
     try {
-      followLoopClosure();
+      followLoopClosure(fused.loop_correction);
       if ((fused.integrated || fused.between_integrations) && fused.T_W_C) {
         // The tracked pose, corrected for the drift measured against the patches so far; the
         // map holds it moved on by loop closure.
         fused.T_W_C_planes = correction_ * *fused.T_W_C;
         // Only with loop closure do the planes keep which keyframes saw them.
         const std::optional<std::int64_t> keyframe_ns =
-            loop_closer_ != nullptr ? fused.keyframe_ns : std::nullopt;
+            follows_loops_ ? fused.keyframe_ns : std::nullopt;
         const core::Isometry loop = keyframe_ns ? loopMotion(*keyframe_ns)
                                                 : core::Isometry::Identity();
         const planes::PlaneDetection detection = detector_.detect(fused.frame);
@@ -305,9 +303,8 @@ FusedFrame PlaneStage::process(FusedFrame fused) {
   return fused;
 }
 
-void PlaneStage::followLoopClosure() {
-  if (loop_closer_ == nullptr) return;
-  std::shared_ptr<const loop::MapCorrection> newest = loop_closer_->correction();
+void PlaneStage::followLoopClosure(std::shared_ptr<const loop::MapCorrection> newest) {
+  if (!follows_loops_) return;
   if (!newest || (loop_correction_ && newest->generation == loop_correction_->generation)) return;
   loop_correction_ = std::move(newest);
   const std::size_t moved = map_.followCorrection(
@@ -325,14 +322,9 @@ core::Isometry PlaneStage::loopMotion(std::int64_t keyframe_ns) const {
 }
 
 std::vector<planes::PatchEvent> PlaneStage::finishStream(
-    std::vector<planes::PatchSnapshot>& finalized) {
-  if (loop_closer_ != nullptr) {
-    const auto start = std::chrono::steady_clock::now();
-    loop_closer_->finish();
-    loop_wait_s_ =
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    followLoopClosure();
-  }
+    std::vector<planes::PatchSnapshot>& finalized,
+    std::shared_ptr<const loop::MapCorrection> last_correction) {
+  followLoopClosure(std::move(last_correction));
   return finish(finalized);
 }
 

@@ -49,7 +49,10 @@ class FakeFrames : public FramePath {
   TrackedFrame track(core::Frame frame) override {
     nap(track_random_, 800);
     out_of_order += frame.index != tracked_++ ? 1 : 0;
-    return {std::move(frame), core::Isometry::Identity(), {}, 0.0, {}};
+    TrackedFrame tracked;
+    tracked.frame = std::move(frame);
+    tracked.T_W_C = core::Isometry::Identity();
+    return tracked;
   }
   FusedFrame integrate(TrackedFrame tracked) override {
     nap(integrate_random_, 800);
@@ -57,6 +60,10 @@ class FakeFrames : public FramePath {
     FusedFrame fused;
     fused.frame = std::move(tracked.frame);
     fused.integrated = true;
+    return fused;
+  }
+  FusedFrame closeLoops(FusedFrame fused) override {
+    out_of_order += fused.frame.index != looped_++ ? 1 : 0;
     return fused;
   }
   FusedFrame findPlanes(FusedFrame fused) override {
@@ -95,7 +102,7 @@ class FakeFrames : public FramePath {
  private:
   std::mt19937 source_random_{1}, track_random_{2}, integrate_random_{3}, planes_random_{4};
   int read_ = 0;
-  std::uint64_t tracked_ = 0, integrated_ = 0, planned_ = 0;
+  std::uint64_t tracked_ = 0, integrated_ = 0, looped_ = 0, planned_ = 0;
   int next_id_ = 1, retired_ = 1;
 };
 

@@ -2,7 +2,7 @@
 // The one place that knows the topology, as a tbb::flow::graph inside a task_arena of the
 // requested concurrency:
 //
-//   source -> limiter -> tracking -> integration -> planes -----------------> report
+//   source -> limiter -> tracking -> integration -> loops -> planes -------> report
 //                ^                                    | finalized patches       ^
 //                |                                    v                         |
 //                |                        describe (many at once)               |
@@ -11,8 +11,10 @@
 //                +---------------- a frame reported frees its place ------------+
 //
 // Every serial stage takes its messages in order: frames in stream order, patches in
-// finalization order (sequencer nodes). The report node is the only one that writes the
-// run's figures; commit records reach it on an edge. The graph calls the stages through the
+// finalization order (sequencer nodes). Keyframes travel with their frame to the loops node,
+// which hands them to loop closure (its own thread) and gives each frame the newest map
+// correction for the plane stage. The report node is the only one that writes the run's
+// figures; commit records reach it on an edge. The graph calls the stages through the
 // narrow interfaces below, so that it can be tested with fakes.
 #include <cstddef>
 #include <optional>
@@ -30,6 +32,9 @@ class FramePath {
   virtual std::optional<core::Frame> next() = 0;  // nothing: the end of the stream
   virtual TrackedFrame track(core::Frame frame) = 0;
   virtual FusedFrame integrate(TrackedFrame tracked) = 0;
+  // Hands the frame's new keyframes to loop closure and gives it the newest map correction
+  // (FusedFrame::loop_correction); without loop closure, nothing.
+  virtual FusedFrame closeLoops(FusedFrame fused) = 0;
   // Also names the patches the frame finalized (finalized_patches) and what else changed
   // (patch_events).
   virtual FusedFrame findPlanes(FusedFrame fused) = 0;

@@ -17,7 +17,7 @@
 #include "tessera/core/trajectory.h"
 #include "tessera/fusion/tracker.h"
 #include "tessera/fusion/tsdf_map.h"
-#include "tessera/loop/loop_closer.h"
+#include "tessera/loop/map_correction.h"
 #include "tessera/pipeline/map_monitor.h"
 #include "tessera/pipeline/stage_timer.h"
 #include "tessera/planes/frame_sharpness.h"
@@ -84,6 +84,8 @@ struct TrackedFrame {
   // The time of the last keyframe the tracker made at or before this frame: loop closure
   // corrects the frame's pose with that keyframe's.
   std::optional<std::int64_t> keyframe_ns;
+  // Keyframes the tracker made at this frame, on their way to loop closure.
+  std::vector<std::shared_ptr<const fusion::KeyframeRecord>> new_keyframes;
 };
 
 // A frame after fusion, with what the sink reports about it.
@@ -95,6 +97,9 @@ struct FusedFrame {
   bool between_integrations = false;
   std::optional<core::Isometry> T_W_C;  // the pose it was fused at
   std::optional<std::int64_t> keyframe_ns;  // TrackedFrame::keyframe_ns
+  std::vector<std::shared_ptr<const fusion::KeyframeRecord>> new_keyframes;  // ditto
+  // With loop closure: its newest map correction when the frame reached the plane stage.
+  std::shared_ptr<const loop::MapCorrection> loop_correction;
   std::string skip_reason;              // why the frame was not integrated
   std::size_t tsdf_bytes = 0;
   std::size_t tsdf_blocks_released = 0;  // this frame, far behind the camera
@@ -118,10 +123,9 @@ struct FusedFrame {
 // frame whose tracking is lost gets no pose, so it cannot corrupt the map.
 class TrackingStage {
  public:
-  // `loop_closer`, when given, receives the tracker's keyframes (it closes loops off the frame
-  // path).
-  TrackingStage(const fusion::TrackerConfig& tracker, PoseSource poses,
-                loop::LoopCloser* loop_closer = nullptr);
+  // The keyframes the tracker makes go on with the frame (TrackedFrame::new_keyframes), to
+  // loop closure when the run has it.
+  TrackingStage(const fusion::TrackerConfig& tracker, PoseSource poses);
 
   TrackedFrame process(core::Frame frame);
 
@@ -132,11 +136,14 @@ class TrackingStage {
   const StageTimer& timer() const { return timer_; }
 
  private:
-  std::optional<core::Isometry> poseOf(const core::Frame& frame, std::string& problem);
+  // The frame's pose, or nothing with the `problem`; `new_keyframes` gets the keyframes the
+  // tracker made at it.
+  std::optional<core::Isometry> poseOf(
+      const core::Frame& frame, std::string& problem,
+      std::vector<std::shared_ptr<const fusion::KeyframeRecord>>& new_keyframes);
 
   fusion::Tracker tracker_;
   PoseSource poses_;
-  loop::LoopCloser* loop_closer_;
   std::size_t tracking_losses_ = 0;
   std::size_t tracking_restarts_ = 0;
   std::size_t relocalisations_ = 0;  // found again after a loss or an interrupted source
@@ -180,21 +187,23 @@ class IntegrationStage {
 };
 
 // Finds the planar regions of each posed frame, grows the patch map with them and their
-// colours, and finalizes patches that stopped growing or left the view. With loop closure the
-// map follows each new correction (PatchMap::followCorrection, then mergeCoinciding), and each
+// colours, and finalizes patches that stopped growing or left the view. With loop closure
+// (`follows_loops`) the map follows each new correction the frames bring
+// (FusedFrame::loop_correction: PatchMap::followCorrection, then mergeCoinciding), and each
 // frame's points are placed with the correction of its keyframe.
 class PlaneStage {
  public:
   PlaneStage(const planes::PlaneDetectorConfig& detector, const planes::PatchMapConfig& patches,
-             const planes::PlaneAlignmentConfig& alignment,
-             loop::LoopCloser* loop_closer = nullptr);
+             const planes::PlaneAlignmentConfig& alignment, bool follows_loops = false);
 
   FusedFrame process(FusedFrame fused);
   // Finalizes every remaining patch above the area bound; `finalized` gets a copy of each for
   // texturing (an interrupted source: what was seen so far is kept).
   std::vector<planes::PatchEvent> finish(std::vector<planes::PatchSnapshot>& finalized);
-  // End of stream: waits for loop closure's last optimisation and follows it, then finish().
-  std::vector<planes::PatchEvent> finishStream(std::vector<planes::PatchSnapshot>& finalized);
+  // End of stream: follows loop closure's last correction (when there is one), then finish().
+  std::vector<planes::PatchEvent> finishStream(
+      std::vector<planes::PatchSnapshot>& finalized,
+      std::shared_ptr<const loop::MapCorrection> last_correction = nullptr);
 
   const planes::PatchMap& map() const { return map_; }
   // Where finalized patches' colour samples go when they leave memory (PatchMap).
@@ -205,14 +214,12 @@ class PlaneStage {
   std::size_t correctionsFollowed() const { return corrections_followed_; }
   std::size_t planesMovedByLoops() const { return planes_moved_; }
   std::size_t planesMergedByLoops() const { return planes_merged_; }
-  // How long the end of the stream waited for loop closure to catch up, seconds.
-  double loopWaitS() const { return loop_wait_s_; }
   const StageTimer& timer() const { return timer_; }
 
  private:
   void count(const std::vector<planes::PatchEvent>& events);
-  // Moves the map with the loop closer's newest correction, if it has one not followed yet.
-  void followLoopClosure();
+  // Moves the map with `newest`, unless it is the correction it follows already.
+  void followLoopClosure(std::shared_ptr<const loop::MapCorrection> newest);
   // The loop-closure motion of the keyframe at `keyframe_ns` (identity before any).
   core::Isometry loopMotion(std::int64_t keyframe_ns) const;
   std::vector<planes::PatchSnapshot> snapshotsOf(
@@ -234,12 +241,11 @@ class PlaneStage {
   // World drift measured against the patches, carried frame to frame, in the tracker's world
   // (before loop closure's motion).
   core::Isometry correction_ = core::Isometry::Identity();
-  loop::LoopCloser* loop_closer_;
+  bool follows_loops_;
   std::shared_ptr<const loop::MapCorrection> loop_correction_;  // the one the map follows
   std::size_t finalizations_ = 0;
   std::size_t retirements_ = 0;
   std::size_t corrections_followed_ = 0, planes_moved_ = 0, planes_merged_ = 0;
-  double loop_wait_s_ = 0.0;
   StageTimer timer_;
 };
 

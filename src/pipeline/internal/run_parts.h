@@ -24,7 +24,8 @@ struct RunParts {
   // Finalized patches' colour samples wait here while out of memory; removed at the end.
   std::filesystem::path sample_dir;
   SourceStage source_stage;
-  // Tracked poses with loop closure on: closes loops on its own thread, fed with keyframes.
+  // Tracked poses with loop closure on: closes loops on its own thread, fed with keyframes
+  // (through `stages`).
   std::unique_ptr<loop::LoopCloser> loop_closer;
   TrackingStage tracking;
   IntegrationStage integration;

@@ -1,7 +1,9 @@
 #pragma once
 // `tessera run`'s stages as the flow graph calls them (flow_graph.h): each call goes to the one
-// stage that does the work. The commit also keeps the patch's bitmap and sums the run's totals
-// for the report.
+// stage that does the work. Loop closure is reached from here only: keyframes in, corrections
+// out onto the frames. The commit also keeps the patch's bitmap and sums the run's totals for
+// the report.
+#include "tessera/loop/loop_closer.h"
 #include "tessera/pipeline/flow_graph.h"
 
 namespace tessera::pipeline::internal {
@@ -10,7 +12,7 @@ class RunStages : public FramePath, public PatchPath, public RunReport {
  public:
   RunStages(SourceStage& source, TrackingStage& tracking, IntegrationStage& integration,
             PlaneStage& planes, const DescribeStage& describe, CommitStage& commit,
-            BitmapFiles& bitmaps, StatsSink& sink)
+            BitmapFiles& bitmaps, StatsSink& sink, loop::LoopCloser* loop_closer)
       : source_(source),
         tracking_(tracking),
         integration_(integration),
@@ -18,18 +20,19 @@ class RunStages : public FramePath, public PatchPath, public RunReport {
         describe_(describe),
         commit_(commit),
         bitmaps_(bitmaps),
-        sink_(sink) {}
+        sink_(sink),
+        loop_closer_(loop_closer) {}
 
   std::optional<core::Frame> next() override { return source_.next(); }
   TrackedFrame track(core::Frame frame) override { return tracking_.process(std::move(frame)); }
   FusedFrame integrate(TrackedFrame tracked) override {
     return integration_.process(std::move(tracked));
   }
+  FusedFrame closeLoops(FusedFrame fused) override;
   FusedFrame findPlanes(FusedFrame fused) override { return planes_.process(std::move(fused)); }
+  // Waits for loop closure's last optimisation, so that the map follows it, then finishes.
   std::vector<planes::PatchEvent> finishStream(
-      std::vector<planes::PatchSnapshot>& finalized) override {
-    return planes_.finishStream(finalized);
-  }
+      std::vector<planes::PatchSnapshot>& finalized) override;
 
   DescribedPatch describe(const PatchJob& job) const override { return describe_.process(job); }
   std::optional<CommitMessage> commit(DescribedPatch described) override;
@@ -40,6 +43,9 @@ class RunStages : public FramePath, public PatchPath, public RunReport {
     sink_.writePatchEvents(events);
   }
 
+  // How long the end of the stream waited for loop closure to catch up, seconds.
+  double loopWaitS() const { return loop_wait_s_; }
+
  private:
   SourceStage& source_;
   TrackingStage& tracking_;
@@ -49,6 +55,8 @@ class RunStages : public FramePath, public PatchPath, public RunReport {
   CommitStage& commit_;
   BitmapFiles& bitmaps_;
   StatsSink& sink_;
+  loop::LoopCloser* loop_closer_;  // null without loop closure
+  double loop_wait_s_ = 0.0;
 };
 
 }  // namespace tessera::pipeline::internal
