@@ -79,14 +79,14 @@ int main(int argc, char** argv) {
       const auto summary =
           pipeline::runPipeline(*source, pipeline::loadRunConfig(std::nullopt), options);
       fps.push_back(summary.fps);
-      frames = summary.frames;
-      tsdf_bytes = summary.tsdf_bytes;
+      frames = summary.stream.frames;
+      tsdf_bytes = summary.integration.tsdf_bytes;
       for (const auto& stage : summary.stages) {
         stage_median_ms[stage.name].push_back(stage.median_ms);
         stage_alone_fps[stage.name].push_back(stage.alone_fps);
         stage_calls[stage.name] = stage.calls;
       }
-      fmt::print("run {}: {} frames, {:.2f} s, {:.1f} frames/s\n", run + 1, summary.frames,
+      fmt::print("run {}: {} frames, {:.2f} s, {:.1f} frames/s\n", run + 1, summary.stream.frames,
                  summary.wall_s, summary.fps);
     }
     fmt::print("\nreplay of {} ({} frames, {} threads, poses: {}, median of {} runs)\n",

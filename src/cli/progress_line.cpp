@@ -28,14 +28,15 @@ std::string ProgressLine::describe(const pipeline::Progress& progress,
   std::string line = fmt::format("frame {}{}  {:.1f} frames/s  map {:.1f} MB", progress.frames_done,
                                  total, fps, static_cast<double>(progress.map_bytes) / 1e6);
   if (snapshot != nullptr) {
-    const pipeline::MonitorCommit& c = snapshot->commits;
-    line += fmt::format("  patches {} live, {} final  textures {:.1f} -> {:.1f} MB",
-                        snapshot->frame.patches_live, snapshot->frame.patches_finalized,
-                        static_cast<double>(c.bytes_before) / 1e6,
-                        static_cast<double>(c.bytes_after) / 1e6);
-    if (c.bytes_after > 0) {
-      line += fmt::format(" ({:.1f}x)", static_cast<double>(c.bytes_before) /
-                                            static_cast<double>(c.bytes_after));
+    const reuse::Economy& economy = snapshot->commits.economy;
+    const pipeline::FrameFigures& frame = snapshot->frame.figures;
+    line +=
+        fmt::format("  patches {} live, {} final  textures {:.1f} -> {:.1f} MB", frame.patches_live,
+                    frame.patches_finalized, 3e-6 * static_cast<double>(economy.pixels_before),
+                    3e-6 * static_cast<double>(economy.pixels_after));
+    if (economy.pixels_after > 0) {
+      line += fmt::format(" ({:.1f}x)", static_cast<double>(economy.pixels_before) /
+                                            static_cast<double>(economy.pixels_after));
     }
     if (snapshot->frame.frames_dropped > 0 || progress.latency_ms) {
       line += fmt::format("  drops {}", snapshot->frame.frames_dropped);

@@ -111,16 +111,17 @@ int runCommand(const RunArguments& args) {
     spdlog::info(
         "{} frames in {:.2f} s ({:.1f} frames/s), {} integrated, {} between integrations, {} bad, "
         "{} without pose",
-        summary.frames, summary.wall_s, summary.fps, summary.frames_integrated,
-        summary.frames_between_integrations, summary.frames_bad, summary.frames_without_pose);
-    if (summary.poses == "track") {
+        summary.stream.frames, summary.wall_s, summary.fps, summary.integration.frames_integrated,
+        summary.integration.frames_between_integrations, summary.input.frames_bad,
+        summary.integration.frames_without_pose);
+    if (summary.tracking.poses == "track") {
       spdlog::info(
           "tracking: {} frames lost, {} relocalised, {} restarts, {} posed from features first",
-          summary.tracking_losses, summary.relocalisations, summary.tracking_restarts,
-          summary.feature_poses);
+          summary.tracking.tracking_losses, summary.tracking.relocalisations,
+          summary.tracking.tracking_restarts, summary.tracking.feature_poses);
     }
-    if (summary.live) {
-      const core::LiveStats& live = summary.live_stats;
+    if (summary.input.live) {
+      const core::LiveStats& live = summary.input.live_stats;
       spdlog::info(
           "live: {} frames sent, {} dropped ({:.1f} %), latency p50 {:.0f} ms, p95 {:.0f} "
           "ms; {} device losses, {} reconnects",
@@ -128,7 +129,7 @@ int runCommand(const RunArguments& args) {
           live.frames_delivered > 0 ? 100.0 * static_cast<double>(live.frames_dropped) /
                                           static_cast<double>(live.frames_delivered)
                                     : 0.0,
-          summary.latency_ms_p50.value_or(0.0), summary.latency_ms_p95.value_or(0.0),
+          summary.stream.latency_ms_p50.value_or(0.0), summary.stream.latency_ms_p95.value_or(0.0),
           live.device_losses, live.reconnects);
     }
     if (summary.ate) {
@@ -138,24 +139,25 @@ int runCommand(const RunArguments& args) {
     spdlog::info(
         "textures: {} patches textured, {} reuse a stored texture, {} new textures in {}; "
         "{:.2f} MB before, {:.2f} MB after reuse",
-        summary.textured_patches, summary.reuses, summary.textures_stored, summary.db,
-        3e-6 * static_cast<double>(summary.pixels_before),
-        3e-6 * static_cast<double>(summary.pixels_after));
+        summary.economy.textured_patches, summary.economy.reuses, summary.commits.textures_stored,
+        summary.database.location, 3e-6 * static_cast<double>(summary.economy.pixels_before),
+        3e-6 * static_cast<double>(summary.economy.pixels_after));
     // As the method's paper tabulates its runs.
     spdlog::info(
         "summary: {} planes | non-pattern textures {} generated / {} matched | patterns {} "
         "generated / {} matched | texture {:.2f} MB before / {:.2f} MB after{}",
-        summary.patches_finalized, summary.textures_stored - summary.patterns_stored,
-        summary.textures_matched, summary.patterns_stored, summary.patterns_matched,
-        3e-6 * static_cast<double>(summary.pixels_before),
-        3e-6 * static_cast<double>(summary.pixels_after),
-        summary.pixels_after > 0
-            ? fmt::format(" ({:.1f}x)", static_cast<double>(summary.pixels_before) /
-                                            static_cast<double>(summary.pixels_after))
+        summary.patches.patches_finalized,
+        summary.commits.textures_stored - summary.commits.patterns_stored,
+        summary.economy.textures_matched, summary.commits.patterns_stored,
+        summary.economy.patterns_matched, 3e-6 * static_cast<double>(summary.economy.pixels_before),
+        3e-6 * static_cast<double>(summary.economy.pixels_after),
+        summary.economy.pixels_after > 0
+            ? fmt::format(" ({:.1f}x)", static_cast<double>(summary.economy.pixels_before) /
+                                            static_cast<double>(summary.economy.pixels_after))
             : std::string());
     spdlog::info("TSDF {:.1f} MB, mesh {} vertices, peak RSS {:.0f} MB; wrote {}/",
-                 static_cast<double>(summary.tsdf_bytes) / 1e6, summary.mesh_vertices,
-                 summary.peak_rss_mb, args.out_dir);
+                 static_cast<double>(summary.integration.tsdf_bytes) / 1e6,
+                 summary.exported.mesh_vertices, summary.peak_rss_mb, args.out_dir);
     return 0;
   } catch (const core::Error& e) {
     spdlog::error("{}", e.what());

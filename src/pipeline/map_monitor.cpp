@@ -22,14 +22,15 @@ void MapMonitor::start(const std::string& source) {
 void MapMonitor::onFrame(const MonitorFrame& frame) {
   std::lock_guard lock(mutex_);
   now_.frame = frame;
-  now_.tracking_ms.add(frame.tracking_ms);
-  now_.integration_ms.add(frame.integration_ms);
-  now_.planes_ms.add(frame.planes_ms);
+  now_.tracking_ms.add(frame.figures.tracking_ms);
+  now_.integration_ms.add(frame.figures.integration_ms);
+  now_.planes_ms.add(frame.figures.planes_ms);
   now_.fps = frame.elapsed_s > 0.0 ? static_cast<double>(frame.frames_done) / frame.elapsed_s
                                    : 0.0;
   if (history_.empty() || frame.elapsed_s - history_.back().elapsed_s >= history_step_s_) {
     history_.push_back({frame.elapsed_s, frame.frames_done, frame.map_bytes,
-                        now_.commits.bytes_before, now_.commits.bytes_after});
+                        3 * now_.commits.economy.pixels_before,
+                        3 * now_.commits.economy.pixels_after});
     if (history_.size() > kMaxHistory) {
       // Keep every other point, and sample half as often from now on: memory stays bounded on
       // a run of hours, and the chart keeps its shape.
@@ -44,15 +45,13 @@ void MapMonitor::onFrame(const MonitorFrame& frame) {
 
 void MapMonitor::onCommit(const MonitorCommit& commit) {
   std::lock_guard lock(mutex_);
-  const std::size_t considered = now_.commits.ccv_considered + commit.ccv_considered;
-  const std::size_t removed = now_.commits.ccv_removed + commit.ccv_removed;
   now_.commits = commit;
-  now_.commits.ccv_considered = considered;
-  now_.commits.ccv_removed = removed;
+  now_.ccv_considered += commit.patch.ccv_considered;
+  now_.ccv_removed += commit.patch.ccv_removed;
   now_.patches_committed += commit.committed ? 1 : 0;
-  now_.bitmap_ms.add(commit.bitmap_ms);
-  now_.match_ms.add(commit.match_ms);
-  if (commit.committed) now_.commit_latency_ms.add(commit.commit_latency_ms);
+  now_.bitmap_ms.add(commit.patch.bitmap_ms);
+  now_.match_ms.add(commit.patch.match_ms);
+  if (commit.committed) now_.commit_latency_ms.add(commit.patch.commit_latency_ms);
   updated();
 }
 
@@ -105,6 +104,8 @@ nlohmann::json orNull(const std::optional<double>& v) {
 nlohmann::json toJson(const MonitorSnapshot& s) {
   const MonitorFrame& f = s.frame;
   const MonitorCommit& c = s.commits;
+  const std::size_t bytes_before = 3 * c.economy.pixels_before;
+  const std::size_t bytes_after = 3 * c.economy.pixels_after;
   nlohmann::json json = {
       {"state", s.state},
       {"generation", s.generation},
@@ -114,22 +115,22 @@ nlohmann::json toJson(const MonitorSnapshot& s) {
       {"frames_total", f.frames_total ? nlohmann::json(*f.frames_total) : nlohmann::json(nullptr)},
       {"fps", s.fps},
       {"frames_dropped", f.frames_dropped},
-      {"latency_ms", f.latency_ms ? nlohmann::json(*f.latency_ms) : nlohmann::json(nullptr)},
-      {"tsdf_bytes", f.tsdf_bytes},
+      {"latency_ms", orNull(f.figures.latency_ms)},
+      {"tsdf_bytes", f.figures.tsdf_bytes},
       {"bitmap_bytes", f.bitmap_bytes},
       {"map_bytes", f.map_bytes},
-      {"patches_live", f.patches_live},
-      {"patches_finalized", f.patches_finalized},
+      {"patches_live", f.figures.patches_live},
+      {"patches_finalized", f.figures.patches_finalized},
       {"patches_committed", s.patches_committed},
       {"textures_stored", c.textures_stored},
       {"patterns_stored", c.patterns_stored},
-      {"textured_patches", c.textured_patches},
-      {"reuses", c.reuses},
-      {"bytes_before", c.bytes_before},
-      {"bytes_after", c.bytes_after},
-      {"compression", orNull(ratio(c.bytes_before, c.bytes_after))},
-      {"ccv_considered", c.ccv_considered},
-      {"ccv_rejection", orNull(ratio(c.ccv_removed, c.ccv_considered))},
+      {"textured_patches", c.economy.textured_patches},
+      {"reuses", c.economy.reuses},
+      {"bytes_before", bytes_before},
+      {"bytes_after", bytes_after},
+      {"compression", orNull(ratio(bytes_before, bytes_after))},
+      {"ccv_considered", s.ccv_considered},
+      {"ccv_rejection", orNull(ratio(s.ccv_removed, s.ccv_considered))},
       {"stage_ms",
        {{"tracking", optionalMean(s.tracking_ms)},
         {"integration", optionalMean(s.integration_ms)},
@@ -198,9 +199,9 @@ std::string toPrometheus(const MonitorSnapshot& s) {
         "Live frames the busy pipeline never read", count(f.frames_dropped));
   e.one("tessera_frames_per_second", "gauge", "Frames through the pipeline over elapsed time",
         s.fps);
-  if (f.latency_ms) {
+  if (f.figures.latency_ms) {
     e.one("tessera_frame_latency_seconds", "gauge",
-          "Last live frame's time from capture to the end of fusion", *f.latency_ms / 1e3);
+          "Last live frame's time from capture to the end of fusion", *f.figures.latency_ms / 1e3);
   }
   e.family("tessera_stage_seconds", "gauge",
            "Recent mean time per frame (tracking, integration, planes) or per patch (bitmap, "
@@ -212,12 +213,12 @@ std::string toPrometheus(const MonitorSnapshot& s) {
   for (const auto& [name, mean] : stages) {
     if (mean->seen) e.sample("tessera_stage_seconds", mean->value / 1e3, fmt::format("stage=\"{}\"", name));
   }
-  e.one("tessera_tsdf_bytes", "gauge", "Memory of the TSDF volume", count(f.tsdf_bytes));
+  e.one("tessera_tsdf_bytes", "gauge", "Memory of the TSDF volume", count(f.figures.tsdf_bytes));
   e.one("tessera_bitmap_bytes", "gauge", "Patch bitmaps held in memory", count(f.bitmap_bytes));
   e.one("tessera_map_bytes", "gauge", "The map's size: TSDF plus bitmaps", count(f.map_bytes));
   e.family("tessera_patches", "gauge", "Patches by state");
-  e.sample("tessera_patches", count(f.patches_live), "state=\"live\"");
-  e.sample("tessera_patches", count(f.patches_finalized), "state=\"finalized\"");
+  e.sample("tessera_patches", count(f.figures.patches_live), "state=\"live\"");
+  e.sample("tessera_patches", count(f.figures.patches_finalized), "state=\"finalized\"");
   e.one("tessera_patches_committed_total", "counter", "Patch versions committed to the database",
         count(s.patches_committed));
   e.one("tessera_textures_stored_total", "counter", "New textures this run stored",
@@ -225,21 +226,23 @@ std::string toPrometheus(const MonitorSnapshot& s) {
   e.one("tessera_patterns_stored_total", "counter",
         "New textures this run stored as one period of a pattern", count(c.patterns_stored));
   e.one("tessera_textured_patches", "gauge", "Patches the map shows through a database texture",
-        count(c.textured_patches));
+        count(c.economy.textured_patches));
   e.one("tessera_texture_reuses", "gauge", "Of those, patches reusing a texture stored before",
-        count(c.reuses));
+        count(c.economy.reuses));
   e.family("tessera_texture_bytes", "gauge",
            "Texture bytes of the map's patches: before reuse (each patch its own bitmap) and "
            "after (each texture they show once)");
-  e.sample("tessera_texture_bytes", count(c.bytes_before), "stage=\"before\"");
-  e.sample("tessera_texture_bytes", count(c.bytes_after), "stage=\"after\"");
-  if (const auto r = ratio(c.bytes_before, c.bytes_after)) {
+  const std::size_t bytes_before = 3 * c.economy.pixels_before;
+  const std::size_t bytes_after = 3 * c.economy.pixels_after;
+  e.sample("tessera_texture_bytes", count(bytes_before), "stage=\"before\"");
+  e.sample("tessera_texture_bytes", count(bytes_after), "stage=\"after\"");
+  if (const auto r = ratio(bytes_before, bytes_after)) {
     e.one("tessera_compression_ratio", "gauge", "Texture bytes before reuse over after", *r);
   }
   e.one("tessera_ccv_candidates_total", "counter",
-        "Stored textures the colour coherence prefilter was asked about", count(c.ccv_considered));
+        "Stored textures the colour coherence prefilter was asked about", count(s.ccv_considered));
   e.one("tessera_ccv_rejected_total", "counter", "Of those, the ones it removed",
-        count(c.ccv_removed));
+        count(s.ccv_removed));
   return e.take();
 }
 

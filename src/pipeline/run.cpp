@@ -42,7 +42,6 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
   RunSummary summary = internal::summariseRun(parts, options, wall_s);
   internal::exportRun(parts, options, summary);
   summary.peak_rss_mb = peakRssMb();
-  summary.rss_growth_mb_per_1000_frames = parts.sink.rssGrowthMbPer1000Frames();
   writeReport(summary, options.out_dir / "report.json");
   if (options.monitor != nullptr) options.monitor->finish(reportJson(summary));
   return summary;

@@ -31,14 +31,14 @@ std::optional<CommitMessage> RunStages::commit(DescribedPatch described) {
   std::optional<texture::PatchBitmap> bitmap = described.bitmap;
   message.record = commit_.process(std::move(described));
   bitmaps_.keep(std::move(bitmap));
-  const CommitStage::Economy economy = commit_.economy();
-  MonitorCommit& totals = message.totals;
-  totals.textures_stored = commit_.texturesStored();
-  totals.patterns_stored = commit_.patternsStored();
-  totals.textured_patches = economy.textured_patches;
-  totals.reuses = economy.reuses;
-  totals.bytes_before = economy.bytes_before;
-  totals.bytes_after = economy.bytes_after;
+  const CommitRecord& record = message.record;
+  const CommitFigures& totals = commit_.figures();
+  message.figures = {record.instance.has_value(),
+                     record.instance && record.instance->reused,
+                     record.figures,
+                     totals.textures_stored,
+                     totals.patterns_stored,
+                     commit_.economy()};
   return message;
 }
 

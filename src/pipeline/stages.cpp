@@ -24,13 +24,15 @@ bool farFrom(const core::Isometry& T_W_reference, const core::Isometry& T_W_C) {
 
 SourceStage::SourceStage(core::FrameSource& source, std::optional<std::size_t> max_frames,
                          const std::atomic<bool>* stop)
-    : source_(source), max_frames_(max_frames), stop_(stop) {}
+    : source_(source), max_frames_(max_frames), stop_(stop) {
+  figures_.live = source.isLive();
+}
 
 std::optional<core::Frame> SourceStage::next() {
   std::optional<core::Frame> frame = read();
   if (!frame) {
     source_.stopStreaming();
-    live_stats_at_end_ = source_.liveStats();
+    figures_.live_stats = source_.liveStats();
   }
   return frame;
 }
@@ -38,7 +40,7 @@ std::optional<core::Frame> SourceStage::next() {
 std::optional<core::Frame> SourceStage::read() {
   while (!max_frames_ || frames_read_ < *max_frames_) {
     if (stop_ != nullptr && stop_->load()) {
-      stopped_on_request_ = true;
+      figures_.stopped_on_request = true;
       spdlog::info("{}: stopped on request after {} frames", source_.name(), frames_read_);
       return std::nullopt;
     }
@@ -53,7 +55,7 @@ std::optional<core::Frame> SourceStage::read() {
         ++frames_read_;
         return std::move(result.frame);
       case core::ReadStatus::kBadFrame:
-        ++bad_frames_;
+        ++figures_.frames_bad;
         spdlog::warn("{}: skipped {}", source_.name(), result.problem);
         break;
       case core::ReadStatus::kInterrupted: {
@@ -65,7 +67,7 @@ std::optional<core::Frame> SourceStage::read() {
       }
       case core::ReadStatus::kEndOfData:
         if (!result.problem.empty()) {
-          end_problem_ = result.problem;
+          figures_.end_problem = result.problem;
           spdlog::error("{}: {}", source_.name(), result.problem);
         }
         return std::nullopt;
@@ -75,7 +77,9 @@ std::optional<core::Frame> SourceStage::read() {
 }
 
 TrackingStage::TrackingStage(const fusion::TrackerConfig& tracker, PoseSource poses)
-    : tracker_(tracker), poses_(poses) {}
+    : tracker_(tracker), poses_(poses) {
+  figures_.poses = poses == PoseSource::kTrack ? "track" : "gt";
+}
 
 std::optional<core::Isometry> TrackingStage::poseOf(
     const core::Frame& frame, std::string& problem,
@@ -89,21 +93,21 @@ std::optional<core::Isometry> TrackingStage::poseOf(
   const fusion::TrackingResult tracked =
       tracker_.track(frame, frame.T_W_C_gt.value_or(core::Isometry::Identity()));
   if (tracked.status == fusion::TrackingStatus::kLost) {
-    ++tracking_losses_;
+    ++figures_.tracking_losses;
     problem = "tracking lost: " + tracked.problem;
     return std::nullopt;
   }
   for (const auto& keyframe : tracked.new_keyframes) keyframe_ns_ = keyframe->timestamp_ns;
   new_keyframes = tracked.new_keyframes;
-  if (tracked.from_features) ++feature_poses_;
+  if (tracked.from_features) ++figures_.feature_poses;
   if (tracked.status == fusion::TrackingStatus::kRelocalised) {
-    ++relocalisations_;
+    ++figures_.relocalisations;
     spdlog::info("frame {}: relocalised against a recent keyframe", frame.index);
   }
   if (tracked.status == fusion::TrackingStatus::kRestarted) {
-    ++tracking_restarts_;
+    ++figures_.tracking_restarts;
     spdlog::warn("frame {}: tracking restarted after {} lost frames", frame.index,
-                 tracking_losses_);
+                 figures_.tracking_losses);
   }
   return tracked.T_W_C;
 }
@@ -129,14 +133,15 @@ TrackedFrame TrackingStage::process(core::Frame frame) {
       spdlog::warn("tracking skipped {}", e.what());
     }
   }
-  tracked.tracking_ms = timer_.lastMs();
+  tracked.figures.tracking_ms = timer_.lastMs();
   tracked.frame = std::move(frame);
   return tracked;
 }
 
 IntegrationStage::IntegrationStage(const fusion::TsdfConfig& tsdf, int thread_cap,
                                    int holdout_every)
-    : map_(tsdf), holdout_every_(holdout_every) {
+    : map_(tsdf) {
+  figures_.holdout_every = holdout_every;
   map_.setThreadCap(thread_cap);
 }
 
@@ -158,24 +163,24 @@ FusedFrame IntegrationStage::process(TrackedFrame tracked) {
   fused.keyframe_ns = tracked.keyframe_ns;
   fused.new_keyframes = std::move(tracked.new_keyframes);
   fused.skip_reason = std::move(tracked.skip_reason);
-  fused.tracking_ms = tracked.tracking_ms;
+  fused.figures = tracked.figures;
   if (tracked.frame.source_interrupted) {
     fused.frame = std::move(tracked.frame);
     return fused;
   }
-  if (core::isHeldOut(tracked.frame.index, holdout_every_)) {
+  if (core::isHeldOut(tracked.frame.index, figures_.holdout_every)) {
     // Posed (the trajectory keeps it, for the view evaluation) but not part of the map.
     fused.held_out = true;
     if (fused.T_W_C) fused.skip_reason = "held out for evaluation (--holdout-every)";
-    ++held_out_;
-    fused.tsdf_bytes = map_.memoryBytes();
+    ++figures_.frames_held_out;
+    fused.figures.tsdf_bytes = map_.memoryBytes();
     fused.frame = std::move(tracked.frame);
     return fused;
   }
   if (fused.T_W_C && !wantsFrame(*fused.T_W_C)) {
     fused.between_integrations = true;
-    ++between_integrations_;
-    fused.tsdf_bytes = map_.memoryBytes();
+    ++figures_.frames_between_integrations;
+    fused.figures.tsdf_bytes = map_.memoryBytes();
     fused.frame = std::move(tracked.frame);
     return fused;
   }
@@ -186,8 +191,9 @@ FusedFrame IntegrationStage::process(TrackedFrame tracked) {
         map_.integrate(tracked.frame, *fused.T_W_C);
         fused.integrated = true;
         if (const double distance_m = map_.config().release_distance_m; distance_m > 0.0) {
-          fused.tsdf_blocks_released = map_.releaseBlocksBehind(*fused.T_W_C, distance_m);
-          blocks_released_ += fused.tsdf_blocks_released;
+          const std::size_t released = map_.releaseBlocksBehind(*fused.T_W_C, distance_m);
+          fused.figures.tsdf_blocks_released = released;
+          figures_.tsdf_blocks_released += released;
         }
       }
     } catch (const core::Error& e) {
@@ -196,14 +202,21 @@ FusedFrame IntegrationStage::process(TrackedFrame tracked) {
       spdlog::warn("fusion skipped {}", e.what());
     }
   }
-  fused.integration_ms = timer_.lastMs();
+  fused.figures.integration_ms = timer_.lastMs();
   if (fused.integrated && tracked.frame.arrival_ns > 0) {
-    fused.latency_ms = static_cast<double>(core::steadyNowNs() - tracked.frame.arrival_ns) / 1e6;
+    fused.figures.latency_ms =
+        static_cast<double>(core::steadyNowNs() - tracked.frame.arrival_ns) / 1e6;
   }
-  (fused.integrated ? integrated_ : skipped_)++;
-  fused.tsdf_bytes = map_.memoryBytes();
+  (fused.integrated ? figures_.frames_integrated : figures_.frames_without_pose)++;
+  fused.figures.tsdf_bytes = map_.memoryBytes();
   fused.frame = std::move(tracked.frame);
   return fused;
+}
+
+IntegrationFigures IntegrationStage::figures() const {
+  IntegrationFigures figures = figures_;
+  figures.tsdf_bytes = map_.memoryBytes();
+  return figures;
 }
 
 PlaneStage::PlaneStage(const planes::PlaneDetectorConfig& detector,
@@ -237,7 +250,8 @@ std::optional<Eigen::Vector3f> PlaneStage::sampleColours(const core::Frame& fram
 
 void PlaneStage::count(const std::vector<planes::PatchEvent>& events) {
   for (const planes::PatchEvent& event : events) {
-    (event.kind == planes::PatchEvent::Kind::kFinalized ? finalizations_ : retirements_)++;
+    (event.kind == planes::PatchEvent::Kind::kFinalized ? figures_.patch_finalizations
+                                                        : figures_.patches_retired)++;
   }
 }
 
@@ -245,15 +259,15 @@ FusedFrame PlaneStage::process(FusedFrame fused) {
   if (fused.frame.source_interrupted) {
     // What was seen before the interruption is kept even if the device never comes back.
     fused.patch_events = finish(fused.finalized_patches);
-    fused.patches_live = map_.liveCount();
-    fused.patches_finalized = map_.finalizedCount();
+    fused.figures.patches_live = map_.liveCount();
+    fused.figures.patches_finalized = map_.finalizedCount();
     return fused;
   }
   if (fused.held_out) {
     // Only the pose, corrected as the frames around it are; the map does not see the frame.
     if (fused.T_W_C) fused.T_W_C_planes = correction_ * *fused.T_W_C;
-    fused.patches_live = map_.liveCount();
-    fused.patches_finalized = map_.finalizedCount();
+    fused.figures.patches_live = map_.liveCount();
+    fused.figures.patches_finalized = map_.finalizedCount();
     return fused;
   }
   {
@@ -270,7 +284,7 @@ FusedFrame PlaneStage::process(FusedFrame fused) {
         const core::Isometry loop = keyframe_ns ? loopMotion(*keyframe_ns)
                                                 : core::Isometry::Identity();
         const planes::PlaneDetection detection = detector_.detect(fused.frame);
-        fused.planes_detected = detection.planes.size();
+        fused.figures.planes_detected = detection.planes.size();
         std::vector<planes::PlaneObservation> observations =
             planes::observationsOf(fused.frame, detection, loop * *fused.T_W_C_planes);
         if (const auto D = planes::alignToPatches(
@@ -297,10 +311,21 @@ FusedFrame PlaneStage::process(FusedFrame fused) {
   count(fused.patch_events);
   fused.finalized_patches = snapshotsOf(fused.patch_events);
   map_.releaseIdleSamples(static_cast<long>(fused.frame.index));
-  fused.planes_ms = timer_.lastMs();
-  fused.patches_live = map_.liveCount();
-  fused.patches_finalized = map_.finalizedCount();
+  fused.figures.planes_ms = timer_.lastMs();
+  fused.figures.patches_live = map_.liveCount();
+  fused.figures.patches_finalized = map_.finalizedCount();
   return fused;
+}
+
+PlaneFigures PlaneStage::figures() const {
+  PlaneFigures figures = figures_;
+  figures.patches_finalized = map_.finalizedCount();
+  for (const planes::Patch& patch : map_.patches()) {
+    figures.colour_samples += patch.samples.size();
+    figures.colour_sample_bytes += patch.samples.bytes();
+  }
+  figures.samples_released = map_.samplesReleased();
+  return figures;
 }
 
 void PlaneStage::followLoopClosure(std::shared_ptr<const loop::MapCorrection> newest) {
@@ -310,9 +335,9 @@ void PlaneStage::followLoopClosure(std::shared_ptr<const loop::MapCorrection> ne
   const std::size_t moved = map_.followCorrection(
       [this](std::int64_t keyframe_ns) { return loop_correction_->at(keyframe_ns); });
   const std::size_t merged = map_.mergeCoinciding();
-  ++corrections_followed_;
-  planes_moved_ += moved;
-  planes_merged_ += merged;
+  ++figures_.loop_corrections_followed;
+  figures_.loop_planes_moved += moved;
+  figures_.loop_planes_merged += merged;
   spdlog::info("loop closure: the map followed optimisation {}: {} planes moved, {} merged",
                loop_correction_->generation, moved, merged);
 }

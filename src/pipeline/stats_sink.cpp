@@ -24,23 +24,35 @@ double residentMb() {
   return static_cast<double>(resident_pages) * static_cast<double>(sysconf(_SC_PAGESIZE)) / 1e6;
 }
 
-}  // namespace
-
-std::optional<double> StatsSink::rssGrowthMbPer1000Frames() const {
-  const std::size_t n = rss_mb_.size();
+// How fast the resident memory grew over the second half of the run's frames (least-squares
+// slope of `rss_mb` against the frame count), MB per 1,000 frames; nothing under 200 frames.
+std::optional<double> rssGrowthMbPer1000Frames(const std::vector<double>& rss_mb) {
+  const std::size_t n = rss_mb.size();
   if (n < 200) return std::nullopt;
   // Least-squares slope of RSS against the frame count over the second half.
   double sx = 0, sy = 0, sxx = 0, sxy = 0, m = 0;
   for (std::size_t i = n / 2; i < n; ++i, ++m) {
     const auto x = static_cast<double>(i);
     sx += x;
-    sy += rss_mb_[i];
+    sy += rss_mb[i];
     sxx += x * x;
-    sxy += x * rss_mb_[i];
+    sxy += x * rss_mb[i];
   }
   const double denominator = m * sxx - sx * sx;
   if (denominator <= 0.0) return std::nullopt;
   return 1000.0 * (m * sxy - sx * sy) / denominator;
+}
+
+}  // namespace
+
+StreamFigures StatsSink::figures() const {
+  StreamFigures figures;
+  figures.frames = frames_done_;
+  figures.interruptions = interruptions_;
+  figures.latency_ms_p50 = percentile(latencies_ms_, 0.50);
+  figures.latency_ms_p95 = percentile(latencies_ms_, 0.95);
+  figures.rss_growth_mb_per_1000_frames = rssGrowthMbPer1000Frames(rss_mb_);
+  return figures;
 }
 
 StatsSink::StatsSink(const std::filesystem::path& out_dir, std::optional<std::size_t> frames_total,
@@ -76,13 +88,14 @@ void StatsSink::process(const FusedFrame& fused) {
     return;
   }
   ++frames_done_;
-  if (fused.latency_ms) latencies_ms_.push_back(*fused.latency_ms);
+  const FrameFigures& figures = fused.figures;
+  if (figures.latency_ms) latencies_ms_.push_back(*figures.latency_ms);
   // The map's pose of the frame: corrected against the patches when the plane stage did so.
   const std::optional<core::Isometry> pose = fused.T_W_C_planes ? fused.T_W_C_planes : fused.T_W_C;
   if (pose) estimate_[fused.frame.timestamp_ns] = *pose;
   if (fused.frame.T_W_C_gt) ground_truth_[fused.frame.timestamp_ns] = *fused.frame.T_W_C_gt;
   const std::size_t bitmap_bytes = bitmap_bytes_ ? bitmap_bytes_() : 0;
-  map_bytes_ = fused.tsdf_bytes + bitmap_bytes;
+  map_bytes_ = figures.tsdf_bytes + bitmap_bytes;
   rss_mb_.push_back(residentMb());
   const double elapsed_s =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
@@ -93,20 +106,12 @@ void StatsSink::process(const FusedFrame& fused) {
                            {"timestamp_ns", fused.frame.timestamp_ns},
                            {"elapsed_s", elapsed_s},
                            {"integrated", fused.integrated},
-                           {"tracking_ms", fused.tracking_ms},
-                           {"integration_ms", fused.integration_ms},
-                           {"tsdf_bytes", fused.tsdf_bytes},
-                           {"tsdf_blocks_released", fused.tsdf_blocks_released},
                            {"bitmap_bytes", bitmap_bytes},
                            {"map_bytes", map_bytes_},
                            {"rss_mb", rss_mb_.back()},
-                           {"planes_ms", fused.planes_ms},
-                           {"planes_detected", fused.planes_detected},
-                           {"patches_live", fused.patches_live},
-                           {"patches_finalized", fused.patches_finalized},
                            {"textures_stored", textures_stored_}};
+    figures.addTo(line);
     if (!fused.integrated) line["skip_reason"] = fused.skip_reason;
-    if (fused.latency_ms) line["latency_ms"] = *fused.latency_ms;
     if (fused.colour_gain) {
       line["colour_gain"] = {(*fused.colour_gain)[0], (*fused.colour_gain)[1],
                              (*fused.colour_gain)[2]};
@@ -126,19 +131,13 @@ void StatsSink::process(const FusedFrame& fused) {
     frame.frames_done = frames_done_;
     frame.frames_total = frames_total_;
     frame.frames_dropped = frames_dropped_ ? frames_dropped_() : 0;
-    frame.latency_ms = fused.latency_ms;
-    frame.tracking_ms = fused.tracking_ms;
-    frame.integration_ms = fused.integration_ms;
-    frame.planes_ms = fused.planes_ms;
-    frame.tsdf_bytes = fused.tsdf_bytes;
+    frame.figures = figures;
     frame.bitmap_bytes = bitmap_bytes;
     frame.map_bytes = map_bytes_;
-    frame.patches_live = fused.patches_live;
-    frame.patches_finalized = fused.patches_finalized;
     monitor_->onFrame(frame);
   }
   if (on_progress_) {
-    on_progress_({frames_done_, frames_total_, elapsed_s, map_bytes_, fused.latency_ms});
+    on_progress_({frames_done_, frames_total_, elapsed_s, map_bytes_, figures.latency_ms});
   }
 }
 
@@ -164,46 +163,25 @@ void StatsSink::writeCommit(const CommitMessage& message) {
   const CommitRecord& record = message.record;
   const std::size_t batch = message.batch.index, batch_size = message.batch.size;
   const std::uint64_t frame_index = message.batch.frame_index;
-  const std::size_t textures_stored = message.totals.textures_stored;
-  if (monitor_ != nullptr) {
-    MonitorCommit commit = message.totals;
-    commit.committed = record.instance.has_value();
-    commit.reused = record.instance && record.instance->reused;
-    commit.bitmap_ms = record.bitmap_ms;
-    commit.match_ms = record.match_ms;
-    commit.commit_latency_ms = record.commit_latency_ms;
-    commit.ccv_considered = record.ccv_considered;
-    commit.ccv_removed = record.ccv_removed;
-    monitor_->onCommit(commit);
-  }
-  textures_stored_ = textures_stored;
+  const MonitorCommit& figures = message.figures;
+  if (monitor_ != nullptr) monitor_->onCommit(figures);
+  textures_stored_ = figures.textures_stored;
   BatchCounts& counts = batches_[batch];
   counts.patches += 1;
-  counts.considered += record.ccv_considered;
-  counts.removed += record.ccv_removed;
-  const bool reused = record.instance && record.instance->reused;
-  counts.reuses += reused ? 1 : 0;
+  counts.considered += figures.patch.ccv_considered;
+  counts.removed += figures.patch.ccv_removed;
+  counts.reuses += figures.reused ? 1 : 0;
   if (write_failed_) return;
   if (record.patch_id != 0 || record.instance) {
-    nlohmann::json line = {{"type", "patch"},
-                           {"event", "committed"},
-                           {"id", record.patch_id},
-                           {"version", record.version},
-                           {"frame", frame_index},
-                           {"committed", record.instance.has_value()},
-                           {"method", record.method},
-                           {"ccv_considered", record.ccv_considered},
-                           {"ccv_removed", record.ccv_removed},
-                           {"bitmap_ms", record.bitmap_ms},
-                           {"describe_ms", record.describe_ms},
-                           {"match_ms", record.match_ms},
-                           {"pattern_ms", record.pattern_ms},
-                           {"commit_latency_ms", record.commit_latency_ms},
-                           {"textures_stored", textures_stored}};
+    nlohmann::json line = {{"type", "patch"},         {"event", "committed"},
+                           {"id", record.patch_id},   {"version", record.version},
+                           {"frame", frame_index},    {"committed", figures.committed},
+                           {"method", record.method}, {"textures_stored", figures.textures_stored}};
+    figures.patch.addTo(line);
     if (record.instance) {
       const core::Similarity2& s = record.instance->transform;
       line["texture_id"] = record.instance->texture_id;
-      line["reused"] = reused;
+      line["reused"] = figures.reused;
       line["transform"] = {s.a, s.b, s.tx, s.ty};
       line["psnr_db"] = record.instance->psnr_db ? nlohmann::json(*record.instance->psnr_db)
                                                  : nlohmann::json(nullptr);

@@ -1,7 +1,6 @@
 #include "tessera/pipeline/texture_db_stages.h"
 
 #include <algorithm>
-#include <set>
 
 #include <spdlog/spdlog.h>
 #include <opencv2/core.hpp>
@@ -29,6 +28,7 @@ cv::Mat validTexels(const texture::PatchBitmap& bitmap) {
 DescribedPatch DescribeStage::process(const PatchJob& job) const {
   DescribedPatch described;
   described.sequence = job.sequence;
+  described.patch_id = job.retired ? *job.retired : job.patch.id;
   described.batch = job.batch;
   described.batch_size = job.batch_size;
   described.frame_index = job.frame_index;
@@ -73,13 +73,19 @@ CommitStage::CommitStage(db::TextureStore& store, reuse::StoreCatalog& catalog,
 CommitRecord CommitStage::process(DescribedPatch described) {
   ScopedStageTime time(timer_);
   CommitRecord record;
-  if (!described.bitmap) return record;
+  if (!described.bitmap) {  // the map shows the patch no more: its bitmap is not current
+    shown_.erase(described.patch_id);
+    return record;
+  }
   const texture::PatchBitmap& bitmap = *described.bitmap;
   record.patch_id = bitmap.id;
   record.version = bitmap.version;
-  record.bitmap_ms = bitmap.build_ms;
-  record.describe_ms = described.describe_ms;
-  record.pattern_ms = described.pattern_ms;
+  PatchCommitFigures& figures = record.figures;
+  figures.bitmap_ms = bitmap.build_ms;
+  figures.describe_ms = described.describe_ms;
+  figures.pattern_ms = described.pattern_ms;
+  // Until it is committed, the map shows the patch's own bitmap.
+  shown_[bitmap.id] = reuse::ShownPatch{bitmap.grid.texels(), {}};
   if (!described.description) return record;
 
   // Against every texture the patches before this one stored: the outcome does not depend on
@@ -88,48 +94,44 @@ CommitRecord CommitStage::process(DescribedPatch described) {
       bitmap, *described.description, described.pattern, catalog_,
       [this](const std::string& key) { return store_.findByContentKey(key); }, rules_);
   record.method = plan.method;
-  record.match_ms = plan.match_ms;
-  record.pattern_ms += plan.layers_ms;
-  record.ccv_considered = plan.ccv_considered;
-  record.ccv_removed = plan.ccv_removed;
-  ccv_considered_ += record.ccv_considered;
-  ccv_removed_ += record.ccv_removed;
-  match_timer_.add(record.match_ms + record.pattern_ms);
+  figures.match_ms = plan.match_ms;
+  figures.pattern_ms += plan.layers_ms;
+  figures.ccv_considered = plan.ccv_considered;
+  figures.ccv_removed = plan.ccv_removed;
+  figures_.ccv_considered += figures.ccv_considered;
+  figures_.ccv_removed += figures.ccv_removed;
+  figures_.match.add(figures.match_ms + figures.pattern_ms);
 
   db::Commit& commit = plan.commit;
   std::vector<std::int64_t> ids;
   const auto commit_start = std::chrono::steady_clock::now();
   try {
     ids = store_.commit(commit);
-    store_commit_ms_.push_back(msSince(commit_start));
+    figures_.store_commit_ms.push_back(msSince(commit_start));
   } catch (const core::Error& e) {
     // The map keeps the patch's own bitmap; the database keeps every earlier commit.
     spdlog::error("patch {} version {}: not committed: {}", bitmap.id, bitmap.version, e.what());
-    ++commit_failures_;
+    ++figures_.commit_failures;
     return record;
   }
   for (std::size_t i = 0; i < plan.fresh.size(); ++i) {
     plan.fresh[i]->id = ids.at(i);
     catalog_.add(plan.fresh[i]);
-    ++textures_stored_;
-    patterns_stored_ += plan.fresh[i]->pattern ? 1 : 0;
+    ++figures_.textures_stored;
+    figures_.patterns_stored += plan.fresh[i]->pattern ? 1 : 0;
   }
   for (db::TextureInstance& instance : commit.instances) {
     if (instance.texture_id < 0) {
       instance.texture_id = ids.at(static_cast<std::size_t>(-instance.texture_id - 1));
     }
-    if (!texture_pixels_.count(instance.texture_id)) {
-      const auto stored = catalog_.load(instance.texture_id);
-      texture_pixels_[instance.texture_id] =
-          stored ? stored->storedRgb().total() : bitmap.grid.texels();
-    }
   }
   instances_[bitmap.id] = commit.instances;
-  patch_pixels_[bitmap.id] = bitmap.grid.texels();
+  shown_[bitmap.id] = reuse::shownPatch(bitmap.grid.texels(), commit.instances,
+                                        catalog_.loadLayers(commit.instances));
   record.instance = commit.instances.front();
   record.overlays.assign(commit.instances.begin() + 1, commit.instances.end());
-  record.commit_latency_ms = msSince(described.finalized_at);
-  commit_latencies_ms_.push_back(record.commit_latency_ms);
+  figures.commit_latency_ms = msSince(described.finalized_at);
+  figures_.commit_latencies_ms.push_back(figures.commit_latency_ms);
   return record;
 }
 
@@ -140,32 +142,15 @@ void CommitStage::retire(int patch_id) {
   const auto commit_start = std::chrono::steady_clock::now();
   try {
     store_.commit(commit);
-    store_commit_ms_.push_back(msSince(commit_start));
+    figures_.store_commit_ms.push_back(msSince(commit_start));
   } catch (const core::Error& e) {
     // The database keeps an instance of a patch the map no longer has; the map is right.
     spdlog::error("patch {} (merged into another): its instances stay: {}", patch_id, e.what());
-    ++commit_failures_;
+    ++figures_.commit_failures;
   }
   instances_.erase(patch_id);
-  patch_pixels_.erase(patch_id);
-  ++retirements_;
-}
-
-CommitStage::Economy CommitStage::economy() const {
-  Economy economy;
-  std::set<std::int64_t> shown;
-  for (const auto& [patch_id, layers] : instances_) {
-    if (layers.empty()) continue;
-    economy.textured_patches += 1;
-    economy.reuses += layers.front().reused ? 1 : 0;
-    economy.bytes_before += 3 * patch_pixels_.at(patch_id);
-    for (const db::TextureInstance& layer : layers) {
-      if (shown.insert(layer.texture_id).second) {
-        economy.bytes_after += 3 * texture_pixels_.at(layer.texture_id);
-      }
-    }
-  }
-  return economy;
+  shown_.erase(patch_id);
+  ++figures_.retirements;
 }
 
 }  // namespace tessera::pipeline

@@ -95,6 +95,26 @@ std::shared_ptr<const match::StoredTexture> StoreCatalog::load(std::int64_t id) 
   return texture;
 }
 
+std::vector<std::shared_ptr<const match::StoredTexture>> StoreCatalog::loadLayers(
+    const std::vector<db::TextureInstance>& layers) const {
+  std::vector<std::shared_ptr<const match::StoredTexture>> stored;
+  for (const db::TextureInstance& layer : layers) {
+    stored.push_back(load(layer.texture_id));
+    if (!stored.back()) return {};
+  }
+  return stored;
+}
+
+ShownPatch shownPatch(std::size_t pixels, const std::vector<db::TextureInstance>& layers,
+                      const std::vector<std::shared_ptr<const match::StoredTexture>>& stored) {
+  ShownPatch shown{pixels, {}};
+  for (std::size_t i = 0; i < stored.size(); ++i) {
+    shown.layers.push_back({layers.at(i).texture_id, stored[i]->storedRgb().total(),
+                            stored[i]->pattern, layers[i].reused, layers[i].psnr_db});
+  }
+  return shown;
+}
+
 void StoreCatalog::add(std::shared_ptr<const match::StoredTexture> texture) {
   // Undescribed (match.enabled false): kept for export, never a candidate.
   if (!texture->description.ccv.values.empty()) {

@@ -110,19 +110,19 @@ TEST(MapExport, ARealSequenceMapLoadsBackInBothFormats) {
   const fs::path out = test::freshTempDir();
   const pipeline::RunSummary summary =
       runInto(test::sourceDir() / "recordings/tum_fr1_rpy_20.oni", out);
-  ASSERT_GT(summary.map_triangles, 0u);
+  ASSERT_GT(summary.exported.map_triangles, 0u);
   tinyobj::ObjReader obj;
   ASSERT_TRUE(obj.ParseFromFile((out / "map.obj").string())) << obj.Error();
   std::size_t triangles = 0;
   for (const tinyobj::shape_t& shape : obj.GetShapes()) {
     triangles += shape.mesh.num_face_vertices.size();
   }
-  EXPECT_EQ(triangles, summary.map_triangles);
+  EXPECT_EQ(triangles, summary.exported.map_triangles);
   std::size_t textured = 0;
   for (const tinyobj::material_t& m : obj.GetMaterials()) textured += !m.diffuse_texname.empty();
   EXPECT_GE(textured, 1u);
   std::size_t meshes = 0;
-  EXPECT_EQ(glbTriangles(out / "map.glb", meshes), summary.map_triangles);
+  EXPECT_EQ(glbTriangles(out / "map.glb", meshes), summary.exported.map_triangles);
   EXPECT_EQ(meshes, obj.GetShapes().size());
 
   // Rendered by tessera eval's readers from three of the run's poses, the glTF shows what the
@@ -181,7 +181,7 @@ TEST(MapExport, TheOfficeMapLoadsBackWithTinyobjloaderAndTinygltf) {
     shapes[shape.name] = &shape;
     triangles += shape.mesh.num_face_vertices.size();
   }
-  EXPECT_EQ(triangles, summary.map_triangles);
+  EXPECT_EQ(triangles, summary.exported.map_triangles);
   std::vector<std::string> material_names;
   for (const tinyobj::material_t& m : obj.GetMaterials()) {
     material_names.push_back(m.name);

@@ -180,22 +180,23 @@ TEST(LiveOpenNi2, ABusyPipelineDropsFramesAndCountsThem) {
   const fs::path out = test::freshTempDir();
   const pipeline::RunSummary summary = runInto(source, out);
   const int sent = envInt("TESSERA_TEST_DEVICE_FRAMES");
-  EXPECT_TRUE(summary.live);
-  EXPECT_EQ(summary.live_stats.frames_delivered, static_cast<std::size_t>(sent));
-  EXPECT_GT(summary.live_stats.frames_dropped, 0u);
+  EXPECT_TRUE(summary.input.live);
+  EXPECT_EQ(summary.input.live_stats.frames_delivered, static_cast<std::size_t>(sent));
+  EXPECT_GT(summary.input.live_stats.frames_dropped, 0u);
   // Every frame sent is either fused, unreadable, or dropped: none is lost silently.
-  EXPECT_EQ(summary.frames + summary.frames_bad + summary.live_stats.frames_dropped,
-            static_cast<std::size_t>(sent));
-  ASSERT_TRUE(summary.latency_ms_p50 && summary.latency_ms_p95);
-  EXPECT_GT(*summary.latency_ms_p50, 0.0);
-  EXPECT_GE(*summary.latency_ms_p95, *summary.latency_ms_p50);
+  EXPECT_EQ(
+      summary.stream.frames + summary.input.frames_bad + summary.input.live_stats.frames_dropped,
+      static_cast<std::size_t>(sent));
+  ASSERT_TRUE(summary.stream.latency_ms_p50 && summary.stream.latency_ms_p95);
+  EXPECT_GT(*summary.stream.latency_ms_p50, 0.0);
+  EXPECT_GE(*summary.stream.latency_ms_p95, *summary.stream.latency_ms_p50);
   std::ifstream in(out / "report.json");
   const auto report = nlohmann::json::parse(in);
-  EXPECT_EQ(report["frames_dropped"].get<std::size_t>(), summary.live_stats.frames_dropped);
+  EXPECT_EQ(report["frames_dropped"].get<std::size_t>(), summary.input.live_stats.frames_dropped);
   EXPECT_GT(report["drop_rate"].get<double>(), 0.0);
   EXPECT_FALSE(report["latency_ms_p95"].is_null());
   // The device left for good at its last frame: the run ended cleanly with the map exported.
-  EXPECT_NE(summary.source_end_problem.find("did not come back"), std::string::npos);
+  EXPECT_NE(summary.input.end_problem.find("did not come back"), std::string::npos);
   EXPECT_TRUE(fs::exists(out / "patches.obj"));
 }
 
@@ -214,15 +215,16 @@ TEST(LiveOpenNi2, StoppingEarlyStopsTheDeviceAndItsRecording) {
     run.max_frames = 5;
     summary = pipeline::runPipeline(source, pipeline::loadRunConfig(std::nullopt), run);
     std::this_thread::sleep_for(std::chrono::milliseconds(300));  // the device would go on
-    EXPECT_EQ(source.liveStats().frames_delivered, summary.live_stats.frames_delivered);
+    EXPECT_EQ(source.liveStats().frames_delivered, summary.input.live_stats.frames_delivered);
   }
-  EXPECT_EQ(summary.frames, 5u);
-  EXPECT_EQ(summary.frames + summary.frames_bad + summary.live_stats.frames_dropped,
-            summary.live_stats.frames_delivered);
+  EXPECT_EQ(summary.stream.frames, 5u);
+  EXPECT_EQ(
+      summary.stream.frames + summary.input.frames_bad + summary.input.live_stats.frames_dropped,
+      summary.input.live_stats.frames_delivered);
   drivers::oni::OniSource recording(dir / "live.oni");
   ASSERT_TRUE(recording.frameCount());
-  EXPECT_GE(*recording.frameCount() + 1, summary.live_stats.frames_delivered);
-  EXPECT_LE(*recording.frameCount(), summary.live_stats.frames_delivered);
+  EXPECT_GE(*recording.frameCount() + 1, summary.input.live_stats.frames_delivered);
+  EXPECT_LE(*recording.frameCount(), summary.input.live_stats.frames_delivered);
 }
 
 // A run that records the device through OpenNI2's Recorder: replaying the recording builds the
@@ -239,7 +241,7 @@ TEST(LiveOpenNi2, ARecordingMadeLiveReplaysToTheSameMap) {
     live = runInto(source, dir / "live");
   }
   const int sent = envInt("TESSERA_TEST_DEVICE_FRAMES");
-  ASSERT_EQ(live.live_stats.frames_delivered, static_cast<std::size_t>(sent));
+  ASSERT_EQ(live.input.live_stats.frames_delivered, static_cast<std::size_t>(sent));
   // OpenNI2's Recorder starts on its own thread and may miss the first frame of a heavily
   // loaded run (the source waits 200 ms for it); it records every later frame.
   drivers::oni::OniSource recording(dir / "live.oni");
@@ -248,7 +250,7 @@ TEST(LiveOpenNi2, ARecordingMadeLiveReplaysToTheSameMap) {
   EXPECT_LE(*recording.frameCount(), static_cast<std::size_t>(sent));
   EXPECT_NEAR(recording.intrinsics().fx, 525.0, 1e-3);  // from the sidecar the run wrote
   const pipeline::RunSummary replay = runInto(recording, dir / "replay");
-  EXPECT_EQ(replay.frames, *recording.frameCount());
+  EXPECT_EQ(replay.stream.frames, *recording.frameCount());
 
   // The same planes: every live patch has a replayed twin within 2 degrees and 3 cm, with an
   // area within 15 %, and the meshes differ by under 5 % (apart from dropped frames, the two
@@ -266,8 +268,8 @@ TEST(LiveOpenNi2, ARecordingMadeLiveReplaysToTheSameMap) {
     EXPECT_TRUE(twin) << "live patch with normal " << p.normal.transpose() << ", offset "
                       << p.offset_m << " m, area " << p.area_m2 << " m2 has no replayed twin";
   }
-  const double vertices_ratio =
-      static_cast<double>(live.mesh_vertices) / static_cast<double>(replay.mesh_vertices);
+  const double vertices_ratio = static_cast<double>(live.exported.mesh_vertices) /
+                                static_cast<double>(replay.exported.mesh_vertices);
   EXPECT_NEAR(vertices_ratio, 1.0, 0.05);
 }
 
@@ -289,13 +291,14 @@ TEST(LiveOpenNi2, AnUnpluggedDeviceIsWaitedForAndResumes) {
   // The frames the scene moved on by while the device was away (at its delivery rate).
   const int away = static_cast<int>(std::lround(envInt("TESSERA_TEST_DEVICE_REPLUG_MS") *
                                                 envInt("TESSERA_TEST_DEVICE_FPS") / 1000.0));
-  EXPECT_EQ(summary.live_stats.device_losses, 2u);  // the unplug, then the end of the scene
-  EXPECT_EQ(summary.live_stats.reconnects, 1u);
-  EXPECT_EQ(summary.source_interruptions, 2u);
-  EXPECT_EQ(summary.live_stats.frames_delivered, static_cast<std::size_t>(frames - away));
-  EXPECT_EQ(summary.frames + summary.frames_bad + summary.live_stats.frames_dropped,
-            static_cast<std::size_t>(frames - away));
-  EXPECT_GT(summary.patches_finalized, 0u);
+  EXPECT_EQ(summary.input.live_stats.device_losses, 2u);  // the unplug, then the end of the scene
+  EXPECT_EQ(summary.input.live_stats.reconnects, 1u);
+  EXPECT_EQ(summary.stream.interruptions, 2u);
+  EXPECT_EQ(summary.input.live_stats.frames_delivered, static_cast<std::size_t>(frames - away));
+  EXPECT_EQ(
+      summary.stream.frames + summary.input.frames_bad + summary.input.live_stats.frames_dropped,
+      static_cast<std::size_t>(frames - away));
+  EXPECT_GT(summary.patches.patches_finalized, 0u);
 
   // The interruption is in stats.jsonl, with the patches it finalized.
   std::ifstream stats(dir / "out" / "stats.jsonl");

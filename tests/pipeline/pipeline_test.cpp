@@ -70,8 +70,8 @@ std::vector<nlohmann::json> readJsonLines(const fs::path& path) {
 // Each finalized patch has its bitmap, referenced from patches.json and patches.obj, and the
 // bitmap shows the plane's checkerboard (levels 40 and 220, 10 cm squares).
 void expectTexturedPatches(const fs::path& out, const RunSummary& summary) {
-  ASSERT_GT(summary.patches_finalized, 0u);
-  EXPECT_EQ(summary.bitmaps, summary.patches_finalized);
+  ASSERT_GT(summary.patches.patches_finalized, 0u);
+  EXPECT_EQ(summary.bitmaps.bitmaps, summary.patches.patches_finalized);
   std::ifstream patches_file(out / "patches.json");
   const auto patches = nlohmann::json::parse(patches_file);
   for (const auto& patch : patches["patches"]) {
@@ -123,13 +123,13 @@ TEST(Pipeline, RunsEveryGoodFrameAndWritesTheOutputs) {
   config.tsdf.integrate_every_n_frames = 1;
   const RunSummary summary = runPipeline(source, config, options);
 
-  EXPECT_EQ(summary.frames, 7u);
-  EXPECT_EQ(summary.frames_bad, 1u);
-  EXPECT_EQ(summary.frames_integrated, 7u);
+  EXPECT_EQ(summary.stream.frames, 7u);
+  EXPECT_EQ(summary.input.frames_bad, 1u);
+  EXPECT_EQ(summary.integration.frames_integrated, 7u);
   EXPECT_EQ(progress_calls, 7u);
-  EXPECT_GT(summary.tsdf_bytes, 0u);
-  EXPECT_FALSE(summary.rss_growth_mb_per_1000_frames);  // too few frames to say
-  EXPECT_GT(summary.mesh_vertices, 1000u);
+  EXPECT_GT(summary.integration.tsdf_bytes, 0u);
+  EXPECT_FALSE(summary.stream.rss_growth_mb_per_1000_frames);  // too few frames to say
+  EXPECT_GT(summary.exported.mesh_vertices, 1000u);
   EXPECT_TRUE(fs::is_regular_file(out / "mesh.ply"));
 
   // stats.jsonl: one line per frame, then the patches finalized at the end of the stream, each
@@ -150,8 +150,8 @@ TEST(Pipeline, RunsEveryGoodFrameAndWritesTheOutputs) {
       EXPECT_EQ(lines[i]["method"], "stored");  // the first texture of an empty database
     }
   }
-  EXPECT_EQ(finalized, summary.patches_finalized);
-  EXPECT_EQ(committed, summary.patches_finalized);
+  EXPECT_EQ(finalized, summary.patches.patches_finalized);
+  EXPECT_EQ(committed, summary.patches.patches_finalized);
   EXPECT_EQ(batches, 1u);
   EXPECT_TRUE(fs::is_regular_file(out / "patches.obj"));
   EXPECT_TRUE(fs::is_regular_file(out / "patches.json"));
@@ -208,7 +208,7 @@ TEST(Pipeline, RunsEveryGoodFrameAndWritesTheOutputs) {
   }
   EXPECT_EQ(report["frames"], 7);
   EXPECT_EQ(report["frames_bad"], 1);
-  EXPECT_EQ(report["textures_stored"], summary.patches_finalized);
+  EXPECT_EQ(report["textures_stored"], summary.patches.patches_finalized);
   EXPECT_EQ(report["reuses"], 0);
   EXPECT_DOUBLE_EQ(report["compression"].get<double>(), 1.0);
   EXPECT_TRUE(fs::is_regular_file(out / "textures.db"));
@@ -226,8 +226,9 @@ TEST(Pipeline, EveryOtherFrameIsIntegratedAndEveryFrameIsPosed) {
   options.out_dir = out;
   options.poses = PoseSource::kGroundTruth;
   const RunSummary summary = runPipeline(source, loadRunConfig(std::nullopt), options);
-  EXPECT_EQ(summary.frames, 7u);
-  EXPECT_EQ(summary.frames_integrated + summary.frames_between_integrations, 7u);
+  EXPECT_EQ(summary.stream.frames, 7u);
+  EXPECT_EQ(summary.integration.frames_integrated + summary.integration.frames_between_integrations,
+            7u);
   std::vector<int> integrated;
   for (const auto& line : readJsonLines(out / "stats.jsonl")) {
     if (line["type"] == "frame" && line["integrated"].get<bool>()) {
@@ -235,7 +236,7 @@ TEST(Pipeline, EveryOtherFrameIsIntegratedAndEveryFrameIsPosed) {
     }
   }
   EXPECT_EQ(integrated, (std::vector<int>{0, 2, 5, 7}));
-  EXPECT_EQ(summary.frames_integrated, 4u);
+  EXPECT_EQ(summary.integration.frames_integrated, 4u);
   std::ifstream trajectory(out / "trajectory.txt");
   std::string line;
   int poses = 0;
@@ -258,7 +259,7 @@ TEST(Pipeline, ResultDoesNotDependOnThreadCount) {
     options.threads = threads;
     options.max_frames = 40;
     const RunSummary summary = runPipeline(source, loadRunConfig(std::nullopt), options);
-    EXPECT_GE(summary.textured_patches, 3u);
+    EXPECT_GE(summary.economy.textured_patches, 3u);
     fingerprints.push_back(test::runFingerprint(options.out_dir));
   }
   EXPECT_EQ(fingerprints[0], fingerprints[1]);
@@ -270,9 +271,9 @@ TEST(Pipeline, AbnormalEndKeepsTheWorkDone) {
   RunOptions options;
   options.out_dir = out;
   const RunSummary summary = runPipeline(source, loadRunConfig(std::nullopt), options);
-  EXPECT_EQ(summary.frames, 4u);
-  EXPECT_EQ(summary.source_end_problem, "recording truncated at frame 4");
-  EXPECT_GT(summary.mesh_vertices, 1000u);
+  EXPECT_EQ(summary.stream.frames, 4u);
+  EXPECT_EQ(summary.input.end_problem, "recording truncated at frame 4");
+  EXPECT_GT(summary.exported.mesh_vertices, 1000u);
   std::ifstream report_file(out / "report.json");
   EXPECT_EQ(nlohmann::json::parse(report_file)["source_end_problem"],
             "recording truncated at frame 4");
@@ -312,7 +313,7 @@ TEST(Pipeline, MaxFramesStopsEarly) {
   RunOptions options;
   options.out_dir = test::freshTempDir();
   options.max_frames = 2;
-  EXPECT_EQ(runPipeline(source, loadRunConfig(std::nullopt), options).frames, 2u);
+  EXPECT_EQ(runPipeline(source, loadRunConfig(std::nullopt), options).stream.frames, 2u);
 }
 
 TEST(Pipeline, UnwritableOutputFolderIsAClearError) {
@@ -337,9 +338,11 @@ TEST(Pipeline, TracksTheRealFastRotatingTumSequenceWithinOneCentimetre) {
   RunOptions options;
   options.out_dir = test::freshTempDir();
   const RunSummary summary = runPipeline(source, RunConfig{}, options);
-  EXPECT_EQ(summary.tracking_losses, 0u);
-  EXPECT_EQ(summary.frames_integrated + summary.frames_between_integrations, 40u);
-  EXPECT_GE(summary.frames_integrated, 20u);  // every 2nd, and each after a turn of 3 degrees
+  EXPECT_EQ(summary.tracking.tracking_losses, 0u);
+  EXPECT_EQ(summary.integration.frames_integrated + summary.integration.frames_between_integrations,
+            40u);
+  EXPECT_GE(summary.integration.frames_integrated,
+            20u);  // every 2nd, and each after a turn of 3 degrees
   ASSERT_TRUE(summary.ate.has_value());
   EXPECT_EQ(summary.ate->pairs, 40u);
   EXPECT_LT(summary.ate->rmse_m, 0.01);
@@ -364,8 +367,9 @@ TEST(Pipeline, RealTumTexturesRenderAboutAsFaithfullyAsTheMeshOnTrainingAndHeldO
   options.poses = PoseSource::kGroundTruth;
   options.holdout_every = 5;
   const RunSummary summary = runPipeline(source, RunConfig{}, options);
-  EXPECT_EQ(summary.frames_held_out, 8u);
-  EXPECT_EQ(summary.frames_integrated + summary.frames_between_integrations, 32u);
+  EXPECT_EQ(summary.integration.frames_held_out, 8u);
+  EXPECT_EQ(summary.integration.frames_integrated + summary.integration.frames_between_integrations,
+            32u);
   drivers::DatasetSource frames(folder);
   const nlohmann::json figures = eval::evaluateRunViews(options.out_dir, frames, {});
   EXPECT_EQ(figures["view_frames_holdout"], 8);

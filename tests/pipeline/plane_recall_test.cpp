@@ -24,7 +24,7 @@ std::optional<nlohmann::json> planeFigures(PoseSource poses) {
   options.out_dir = test::freshTempDir();
   options.poses = poses;
   const RunSummary summary = runPipeline(source, loadRunConfig(std::nullopt), options);
-  EXPECT_EQ(summary.frames, 320u);
+  EXPECT_EQ(summary.stream.frames, 320u);
   return eval::evaluateRun(options.out_dir, test::sourceDir() / "recordings/office.gt.json");
 }
 

@@ -103,14 +103,14 @@ TEST_F(PostgresRun, AServerStoppedMidRunLosesNothingAndNoPasswordIsWrittenOrLogg
   if (outage.joinable()) outage.join();
   spdlog::default_logger()->sinks().pop_back();
 
-  ASSERT_TRUE(summary.server_link);
-  const db::ServerLink& link = *summary.server_link;
+  ASSERT_TRUE(summary.database.server_link);
+  const db::ServerLink& link = *summary.database.server_link;
   EXPECT_EQ(link.outages, 1u);
   EXPECT_GE(link.replayed_commits, 1u);
   EXPECT_EQ(link.pending_commits, 0u);
   EXPECT_EQ(link.refused_commits, 0u);
   EXPECT_GT(link.disconnected_s, 0.5);
-  EXPECT_EQ(summary.commit_failures, 0u);
+  EXPECT_EQ(summary.commits.commit_failures, 0u);
   EXPECT_FALSE(fs::exists(pg_out / "db_journal.sqlite"));  // emptied, then removed
 
   const auto store = db::openTextureStore(url, {.create = false, .read_only = true});

@@ -25,14 +25,20 @@ namespace fs = std::filesystem;
 
 const fs::path kRecording = test::sourceDir() / "recordings/office.oni";
 
-RunSummary runOffice(const fs::path& out, int threads, std::optional<std::string> db = {}) {
+// `live`, when given, gets the texture economy the monitor showed after the last commit.
+RunSummary runOffice(const fs::path& out, int threads, std::optional<std::string> db = {},
+                     reuse::Economy* live = nullptr) {
   drivers::oni::OniSource source(kRecording);
+  MapMonitor monitor;
   RunOptions options;
   options.out_dir = out;
   options.threads = threads;
   options.poses = PoseSource::kGroundTruth;
   options.db = std::move(db);
-  return runPipeline(source, loadRunConfig(std::nullopt), options);
+  options.monitor = &monitor;
+  RunSummary summary = runPipeline(source, loadRunConfig(std::nullopt), options);
+  if (live != nullptr) *live = monitor.snapshot().commits.economy;
+  return summary;
 }
 
 // (patch, version, layer, texture, reused) of every instance.
@@ -76,23 +82,30 @@ TEST(TextureReuse, TheSecondTableReusesTheFirstAndOneOrTwoThreadsStoreTheSame) {
   TESSERA_REQUIRE_DEFAULT_RECORDING();
   const fs::path root = test::freshTempDir();
   const RunSummary one = runOffice(root / "one", 1);
-  const RunSummary two = runOffice(root / "two", 2);
-  EXPECT_EQ(one.textures_stored, two.textures_stored);
-  EXPECT_EQ(one.reuses, two.reuses);
-  EXPECT_EQ(one.patterns_stored, two.patterns_stored);
-  EXPECT_GE(two.patterns_stored, 1u);  // the tiled floor, or a brick wall, as one cell
-  EXPECT_EQ(one.ccv_considered, two.ccv_considered);
-  EXPECT_EQ(one.ccv_removed, two.ccv_removed);
+  reuse::Economy live;
+  const RunSummary two = runOffice(root / "two", 2, std::nullopt, &live);
+  EXPECT_EQ(one.commits.textures_stored, two.commits.textures_stored);
+  EXPECT_EQ(one.economy.reuses, two.economy.reuses);
+  EXPECT_EQ(one.commits.patterns_stored, two.commits.patterns_stored);
+  EXPECT_GE(two.commits.patterns_stored, 1u);  // the tiled floor, or a brick wall, as one cell
+  EXPECT_EQ(one.commits.ccv_considered, two.commits.ccv_considered);
+  EXPECT_EQ(one.commits.ccv_removed, two.commits.ccv_removed);
   EXPECT_EQ(instancesOf(root / "one/textures.db"), instancesOf(root / "two/textures.db"));
   // Every stage saw the frames in the source's order, with one thread or two.
   EXPECT_EQ(readText(root / "one/trajectory.txt"), readText(root / "two/trajectory.txt"));
   EXPECT_TRUE(timestampsAscend(root / "two/trajectory.txt"));
-  EXPECT_GE(two.reuses, 1u);
-  EXPECT_LT(two.pixels_after, two.pixels_before);
+  EXPECT_GE(two.economy.reuses, 1u);
+  EXPECT_LT(two.economy.pixels_after, two.economy.pixels_before);
+  // The live economy is the report's: after the last commit the two agree.
+  EXPECT_EQ(live.pixels_before, two.economy.pixels_before);
+  EXPECT_EQ(live.pixels_after, two.economy.pixels_after);
+  EXPECT_EQ(live.textured_patches, two.economy.textured_patches);
+  EXPECT_EQ(live.reuses, two.economy.reuses);
+  EXPECT_EQ(live.overlays, two.economy.overlays);
   // The paper's table: the north brick wall matches the south wall's pattern; the second
   // table and the second plaster wall match stored (non-pattern) textures.
-  EXPECT_GE(two.patterns_matched, 1u);
-  EXPECT_GE(two.textures_matched, 2u);
+  EXPECT_GE(two.economy.patterns_matched, 1u);
+  EXPECT_GE(two.economy.textures_matched, 2u);
 
   const nlohmann::json figures =
       eval::evaluateRun(root / "two", test::sourceDir() / "recordings/office.gt.json");
@@ -109,7 +122,7 @@ TEST(TextureReuse, TheSecondTableReusesTheFirstAndOneOrTwoThreadsStoreTheSame) {
   ASSERT_TRUE(texture_of_plane.count("table_1.top") && texture_of_plane.count("table_2.top"));
   EXPECT_EQ(texture_of_plane["table_1.top"], texture_of_plane["table_2.top"]);
   EXPECT_TRUE(second_table_reused.value_or(false));
-  for (const double psnr : two.shown_psnrs_db) {  // reuses and patterns
+  for (const double psnr : two.economy.shown_psnrs_db) {  // reuses and patterns
     EXPECT_GE(psnr, loadRunConfig(std::nullopt).match.min_psnr_db);
   }
 
@@ -119,7 +132,7 @@ TEST(TextureReuse, TheSecondTableReusesTheFirstAndOneOrTwoThreadsStoreTheSame) {
   // object in the OBJ.
   ASSERT_TRUE(texture_of_plane.count("wall_north") && texture_of_plane.count("wall_south"));
   EXPECT_EQ(texture_of_plane["wall_north"], texture_of_plane["wall_south"]);
-  EXPECT_EQ(one.overlays, two.overlays);
+  EXPECT_EQ(one.economy.overlays, two.economy.overlays);
   std::optional<int> north_patch;
   for (const auto& patch : figures["textures"]) {
     if (patch["plane"] == "wall_north") north_patch = patch["patch"].get<int>();
@@ -143,7 +156,7 @@ TEST(TextureReuse, TheSecondTableReusesTheFirstAndOneOrTwoThreadsStoreTheSame) {
   // texture, with what differs (the blackboard, the posters' places) as overlays.
   ASSERT_TRUE(texture_of_plane.count("wall_west") && texture_of_plane.count("wall_east"));
   EXPECT_EQ(texture_of_plane["wall_west"], texture_of_plane["wall_east"]);
-  EXPECT_GE(two.overlays, 4u);
+  EXPECT_GE(two.economy.overlays, 4u);
   const std::string text = readText(root / "two/patches.obj");
   EXPECT_NE(text.find(fmt::format("o patch_{}_v", *north_patch)), std::string::npos);
   EXPECT_NE(text.find("_overlay_1"), std::string::npos);
@@ -161,8 +174,9 @@ TEST(TextureReuse, ASecondRunWithTheSameDatabaseReusesWhatTheFirstStored) {
   const RunSummary second = runOffice(root / "second", 2, db_path);
   const std::size_t textures_after_second =
       db::openSqliteStore(db_path, {false, true})->stats().textures;
-  ASSERT_GT(second.textured_patches, 0u);
-  EXPECT_GE(static_cast<double>(second.reuses), 0.9 * static_cast<double>(second.textured_patches));
+  ASSERT_GT(second.economy.textured_patches, 0u);
+  EXPECT_GE(static_cast<double>(second.economy.reuses),
+            0.9 * static_cast<double>(second.economy.textured_patches));
   EXPECT_LE(static_cast<double>(textures_after_second),
             1.1 * static_cast<double>(textures_after_first));
   EXPECT_EQ(db::openSqliteStore(db_path, {false, true})->runs().size(), 2u);

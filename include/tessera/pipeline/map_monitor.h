@@ -15,6 +15,9 @@
 
 #include <nlohmann/json.hpp>
 
+#include "tessera/pipeline/stage_figures.h"
+#include "tessera/reuse/map_economy.h"
+
 namespace tessera::pipeline {
 
 // One frame out of the pipeline (StatsSink::process).
@@ -23,23 +26,17 @@ struct MonitorFrame {
   std::size_t frames_done = 0;
   std::optional<std::size_t> frames_total;
   std::size_t frames_dropped = 0;  // live sources: frames the busy pipeline never read
-  std::optional<double> latency_ms;
-  double tracking_ms = 0.0, integration_ms = 0.0, planes_ms = 0.0;
-  std::size_t tsdf_bytes = 0, bitmap_bytes = 0, map_bytes = 0;
-  std::size_t patches_live = 0, patches_finalized = 0;
+  FrameFigures figures;            // the frame's own, as its stats.jsonl line gives them
+  std::size_t bitmap_bytes = 0, map_bytes = 0;
 };
 
 // One patch through matching and commit, with the run's totals after it.
 struct MonitorCommit {
   bool committed = false;
   bool reused = false;
-  double bitmap_ms = 0.0, match_ms = 0.0, commit_latency_ms = 0.0;
-  std::size_t ccv_considered = 0, ccv_removed = 0;
+  PatchCommitFigures patch;  // the patch's own, as its stats.jsonl line gives them
   std::size_t textures_stored = 0, patterns_stored = 0;
-  // The map's current instances: patches shown through a database texture, those reusing one,
-  // their bitmaps' bytes (before reuse) and the bytes of the distinct textures they show.
-  std::size_t textured_patches = 0, reuses = 0;
-  std::size_t bytes_before = 0, bytes_after = 0;
+  reuse::Economy economy;  // the map's now: report.json's figures so far
 };
 
 // Mean of the recent values: each new one weighs 1/16 (about the last second at 30 frames/s).
@@ -54,8 +51,9 @@ struct MonitorSnapshot {
   std::string state = "idle";    // "idle" (no run: db serve), "running" or "finished"
   std::string source;
   MonitorFrame frame;
-  MonitorCommit commits;
+  MonitorCommit commits;  // the newest
   std::size_t patches_committed = 0;
+  std::size_t ccv_considered = 0, ccv_removed = 0;    // over every commit so far
   RecentMean tracking_ms, integration_ms, planes_ms;  // per frame
   RecentMean bitmap_ms, match_ms, commit_latency_ms;  // per patch
   double fps = 0.0;                                   // frames over elapsed time

@@ -19,6 +19,7 @@
 #include "tessera/fusion/tsdf_map.h"
 #include "tessera/loop/map_correction.h"
 #include "tessera/pipeline/map_monitor.h"
+#include "tessera/pipeline/stage_figures.h"
 #include "tessera/pipeline/stage_timer.h"
 #include "tessera/planes/frame_sharpness.h"
 #include "tessera/planes/patch_map.h"
@@ -44,12 +45,9 @@ class SourceStage {
   std::optional<core::Frame> next();
 
   std::size_t framesRead() const { return frames_read_; }
-  std::size_t badFrames() const { return bad_frames_; }
-  bool stoppedOnRequest() const { return stopped_on_request_; }
-  // Set when the source ended abnormally (truncated recording, lost device).
-  const std::string& endProblem() const { return end_problem_; }
-  // The live source's counts when its stream ended (a device keeps sending after that).
-  const core::LiveStats& liveStatsAtEnd() const { return live_stats_at_end_; }
+  // The live source's counts in it are those when its stream ended (a device keeps sending
+  // after that).
+  const SourceFigures& figures() const { return figures_; }
   // Frames a live source dropped up to its last read; safe to call from any thread.
   std::size_t framesDroppedSoFar() const { return frames_dropped_so_far_.load(); }
   const StageTimer& timer() const { return timer_; }
@@ -61,10 +59,7 @@ class SourceStage {
   std::optional<std::size_t> max_frames_;
   const std::atomic<bool>* stop_;
   std::size_t frames_read_ = 0;
-  std::size_t bad_frames_ = 0;
-  bool stopped_on_request_ = false;
-  std::string end_problem_;
-  core::LiveStats live_stats_at_end_;
+  SourceFigures figures_;
   std::atomic<std::size_t> frames_dropped_so_far_{0};
   StageTimer timer_;
 };
@@ -80,7 +75,7 @@ struct TrackedFrame {
   core::Frame frame;                    // colour registered to depth
   std::optional<core::Isometry> T_W_C;  // nothing: do not integrate
   std::string skip_reason;
-  double tracking_ms = 0.0;
+  FrameFigures figures;  // tracking_ms so far
   // The time of the last keyframe the tracker made at or before this frame: loop closure
   // corrects the frame's pose with that keyframe's.
   std::optional<std::int64_t> keyframe_ns;
@@ -101,18 +96,9 @@ struct FusedFrame {
   // With loop closure: its newest map correction when the frame reached the plane stage.
   std::shared_ptr<const loop::MapCorrection> loop_correction;
   std::string skip_reason;              // why the frame was not integrated
-  std::size_t tsdf_bytes = 0;
-  std::size_t tsdf_blocks_released = 0;  // this frame, far behind the camera
-  double tracking_ms = 0.0;
-  double integration_ms = 0.0;
-  // Live sources: from the frame's arrival at this host to the end of its integration.
-  std::optional<double> latency_ms;
+  FrameFigures figures;                 // the plane stage's too, once it is through
   // Filled by the plane stage.
   std::optional<core::Isometry> T_W_C_planes;  // the pose corrected against the patch map
-  double planes_ms = 0.0;
-  std::size_t planes_detected = 0;
-  std::size_t patches_live = 0;
-  std::size_t patches_finalized = 0;
   std::optional<Eigen::Vector3f> colour_gain;  // the frame's exposure gain, when it gave colour
   std::vector<planes::PatchEvent> patch_events;
   // A copy of each patch finalized in this frame, for the texturing stage.
@@ -129,10 +115,7 @@ class TrackingStage {
 
   TrackedFrame process(core::Frame frame);
 
-  std::size_t trackingLosses() const { return tracking_losses_; }
-  std::size_t trackingRestarts() const { return tracking_restarts_; }
-  std::size_t relocalisations() const { return relocalisations_; }
-  std::size_t featurePoses() const { return feature_poses_; }
+  const TrackingFigures& figures() const { return figures_; }
   const StageTimer& timer() const { return timer_; }
 
  private:
@@ -144,10 +127,7 @@ class TrackingStage {
 
   fusion::Tracker tracker_;
   PoseSource poses_;
-  std::size_t tracking_losses_ = 0;
-  std::size_t tracking_restarts_ = 0;
-  std::size_t relocalisations_ = 0;  // found again after a loss or an interrupted source
-  std::size_t feature_poses_ = 0;    // frames whose solve started from a feature pose
+  TrackingFigures figures_;
   std::optional<std::int64_t> keyframe_ns_;  // the newest keyframe's time
   StageTimer timer_;
 };
@@ -163,11 +143,7 @@ class IntegrationStage {
   FusedFrame process(TrackedFrame tracked);
 
   const fusion::TsdfMap& map() const { return map_; }
-  std::size_t framesIntegrated() const { return integrated_; }
-  std::size_t framesSkipped() const { return skipped_; }
-  std::size_t framesHeldOut() const { return held_out_; }
-  std::size_t framesBetweenIntegrations() const { return between_integrations_; }
-  std::size_t blocksReleased() const { return blocks_released_; }
+  IntegrationFigures figures() const;
   const StageTimer& timer() const { return timer_; }
 
  private:
@@ -175,14 +151,9 @@ class IntegrationStage {
   bool wantsFrame(const core::Isometry& T_W_C);
 
   fusion::TsdfMap map_;
-  int holdout_every_;
   std::optional<core::Isometry> last_integrated_pose_;
   int posed_since_integrated_ = 0;
-  std::size_t held_out_ = 0;
-  std::size_t between_integrations_ = 0;
-  std::size_t integrated_ = 0;
-  std::size_t skipped_ = 0;
-  std::size_t blocks_released_ = 0;
+  IntegrationFigures figures_;  // all but tsdf_bytes, read from the map
   StageTimer timer_;
 };
 
@@ -208,12 +179,7 @@ class PlaneStage {
   const planes::PatchMap& map() const { return map_; }
   // Where finalized patches' colour samples go when they leave memory (PatchMap).
   void spillSamplesTo(std::filesystem::path dir) { map_.setSampleSpillDir(std::move(dir)); }
-  std::size_t finalizations() const { return finalizations_; }  // versions included
-  std::size_t retirements() const { return retirements_; }
-  // Loop-closure corrections the map followed, planes they moved and planes merged after.
-  std::size_t correctionsFollowed() const { return corrections_followed_; }
-  std::size_t planesMovedByLoops() const { return planes_moved_; }
-  std::size_t planesMergedByLoops() const { return planes_merged_; }
+  PlaneFigures figures() const;
   const StageTimer& timer() const { return timer_; }
 
  private:
@@ -243,9 +209,7 @@ class PlaneStage {
   core::Isometry correction_ = core::Isometry::Identity();
   bool follows_loops_;
   std::shared_ptr<const loop::MapCorrection> loop_correction_;  // the one the map follows
-  std::size_t finalizations_ = 0;
-  std::size_t retirements_ = 0;
-  std::size_t corrections_followed_ = 0, planes_moved_ = 0, planes_merged_ = 0;
+  PlaneFigures figures_;  // the counts; the map's own figures are read from it
   StageTimer timer_;
 };
 
@@ -315,17 +279,11 @@ class StatsSink {
   // Closes the files; throws core::Error naming one whose writing failed (disk full).
   void flush();
 
-  std::size_t framesDone() const { return frames_done_; }
+  StreamFigures figures() const;
   std::size_t mapBytes() const { return map_bytes_; }
   // The poses frames were fused at, and the recording's ground truth for the same frames.
   const core::Trajectory& estimate() const { return estimate_; }
   const core::Trajectory& groundTruth() const { return ground_truth_; }
-  // Capture-to-fusion latency of each frame of a live source, ms, in arrival order.
-  const std::vector<double>& latenciesMs() const { return latencies_ms_; }
-  std::size_t interruptions() const { return interruptions_; }
-  // How fast the resident memory grew over the second half of the run's frames (least-squares
-  // slope), MB per 1,000 frames; nothing for runs under 200 frames.
-  std::optional<double> rssGrowthMbPer1000Frames() const;
   const StageTimer& timer() const { return timer_; }
 
  private:
@@ -341,11 +299,11 @@ class StatsSink {
   std::chrono::steady_clock::time_point start_;
   std::size_t frames_done_ = 0;
   std::size_t map_bytes_ = 0;
+  std::size_t interruptions_ = 0;
   core::Trajectory estimate_;
   core::Trajectory ground_truth_;
   std::vector<double> latencies_ms_;
   std::vector<double> rss_mb_;  // resident memory after each frame
-  std::size_t interruptions_ = 0;
   bool write_failed_ = false;
   std::size_t textures_stored_ = 0;
   struct BatchCounts {

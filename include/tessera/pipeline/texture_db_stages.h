@@ -44,6 +44,7 @@ struct PatchJob {
 // out without the database.
 struct DescribedPatch {
   std::size_t sequence = 0;
+  int patch_id = 0;
   std::optional<int> retired;  // a retirement (PatchJob), nothing built
   std::size_t batch = 0;
   std::size_t batch_size = 0;
@@ -83,17 +84,15 @@ struct CommitRecord {
   std::optional<db::TextureInstance> instance;  // nothing: no bitmap, or the commit failed
   std::vector<db::TextureInstance> overlays;    // layers 1.. drawn on top of `instance`
   std::string method;                           // reuse::CommitPlan::method
-  std::size_t ccv_considered = 0, ccv_removed = 0;
-  double bitmap_ms = 0.0, describe_ms = 0.0, match_ms = 0.0, pattern_ms = 0.0;
-  double commit_latency_ms = 0.0;
+  PatchCommitFigures figures;
 };
 
 // A commit as the run's report sees it: what was decided, the batch of patches it belongs to,
-// and the run's totals after it.
+// and its figures with the run's totals after it.
 struct CommitMessage {
   CommitRecord record;
   DescribedPatch::Batch batch;
-  MonitorCommit totals;
+  MonitorCommit figures;
 };
 
 // Serial, in finalization order: plans each patch's commit against every texture stored so
@@ -108,28 +107,13 @@ class CommitStage {
   // Patch `patch_id` was merged into another: its instances leave the database and the map.
   // A failed commit is counted and logged, as for process().
   void retire(int patch_id);
-  std::size_t retirements() const { return retirements_; }
 
-  // The newest instances of each patch id (its layers, 0 first), and the textures they use
-  // (pixels per texture).
+  // The newest committed instances of each patch id (its layers, 0 first).
   const std::map<int, std::vector<db::TextureInstance>>& instances() const { return instances_; }
-  const std::map<std::int64_t, std::size_t>& texturePixels() const { return texture_pixels_; }
-  std::size_t texturesStored() const { return textures_stored_; }
-  std::size_t patternsStored() const { return patterns_stored_; }
-  // The map's committed patches now: how many, how many reuse a texture, their bitmaps' bytes
-  // and the bytes of the distinct textures they show (layers included). The live counterpart
-  // of report.json's economy, which also counts bitmaps never committed.
-  struct Economy {
-    std::size_t textured_patches = 0, reuses = 0, bytes_before = 0, bytes_after = 0;
-  };
-  Economy economy() const;
-  std::size_t commitFailures() const { return commit_failures_; }
-  std::size_t ccvConsidered() const { return ccv_considered_; }
-  std::size_t ccvRemoved() const { return ccv_removed_; }
-  const std::vector<double>& commitLatenciesMs() const { return commit_latencies_ms_; }
-  // The database's own share: each TextureStore::commit call (retirements included).
-  const std::vector<double>& storeCommitMs() const { return store_commit_ms_; }
-  const StageTimer& matchTimer() const { return match_timer_; }
+  const CommitFigures& figures() const { return figures_; }
+  // The map's texture economy now, over the newest bitmap of each patch committed or not (as
+  // report.json's, computed at export from the files the map shows).
+  reuse::Economy economy() const { return reuse::economyOf(shown_); }
   const StageTimer& timer() const { return timer_; }
 
  private:
@@ -137,12 +121,9 @@ class CommitStage {
   reuse::StoreCatalog& catalog_;
   reuse::CommitRules rules_;
   std::map<int, std::vector<db::TextureInstance>> instances_;
-  std::map<std::int64_t, std::size_t> texture_pixels_;
-  std::map<int, std::size_t> patch_pixels_;  // texels of each committed patch's bitmap
-  std::size_t textures_stored_ = 0, patterns_stored_ = 0, commit_failures_ = 0, retirements_ = 0;
-  std::size_t ccv_considered_ = 0, ccv_removed_ = 0;
-  std::vector<double> commit_latencies_ms_, store_commit_ms_;
-  StageTimer match_timer_, timer_;
+  std::map<int, reuse::ShownPatch> shown_;  // each patch as the map shows it now
+  CommitFigures figures_;
+  StageTimer timer_;
 };
 
 }  // namespace tessera::pipeline

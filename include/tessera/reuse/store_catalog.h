@@ -10,6 +10,7 @@
 
 #include "tessera/db/texture_store.h"
 #include "tessera/match/match_cascade.h"
+#include "tessera/reuse/map_economy.h"
 
 namespace tessera::reuse {
 
@@ -24,6 +25,11 @@ class StoreCatalog : public match::TextureCatalog {
   std::vector<match::CcvNeighbour> nearest(const std::vector<float>& ccv, double max_distance,
                                            std::size_t k) const override;
   std::shared_ptr<const match::StoredTexture> load(std::int64_t id) const override;
+
+  // The stored textures of a patch's layers, in order; none when one cannot be loaded (the map
+  // then shows the patch's own bitmap).
+  std::vector<std::shared_ptr<const match::StoredTexture>> loadLayers(
+      const std::vector<db::TextureInstance>& layers) const;
 
   // After a commit.
   void add(std::shared_ptr<const match::StoredTexture> texture);
@@ -48,6 +54,11 @@ class StoreCatalog : public match::TextureCatalog {
   mutable std::list<std::int64_t> recency_;  // most recently used first
   mutable std::size_t cached_bytes_ = 0;
 };
+
+// A patch of `pixels` texels as the map shows it: through `stored` (loadLayers of `layers`),
+// or its own bitmap when `stored` is empty.
+ShownPatch shownPatch(std::size_t pixels, const std::vector<db::TextureInstance>& layers,
+                      const std::vector<std::shared_ptr<const match::StoredTexture>>& stored);
 
 // A database record as the cascade sees it; its CCV and features are computed again when the
 // record's were made under other settings.

@@ -48,7 +48,4 @@ RunSummary summariseRun(RunParts& parts, const RunOptions& options, double wall_
 // shows, patches.obj/json, map.obj and map.glb; adds their figures to `summary`.
 void exportRun(RunParts& parts, const RunOptions& options, RunSummary& summary);
 
-// The p-quantile (nearest rank) of `values`; nothing when there are none.
-std::optional<double> percentile(std::vector<double> values, double p);
-
 }  // namespace tessera::pipeline::internal
