@@ -72,7 +72,7 @@ MapObject overlayObject(const planes::Patch& patch, const planes::TextureBinding
   const planes::Patch::Frame frame = patch.planeFrame();
   for (std::size_t i = 0; i < 4; ++i) {
     object.positions.push_back(frame.at(quad.uv[i].x(), quad.uv[i].y()) -
-                               planes::kOverlayLift_m * patch.normal);
+                               planes::kOverlayLift_m * patch.normal());
     object.uvs.push_back(quad.st[i]);
   }
   object.triangles = {{0, 1, 2}, {0, 2, 3}};
@@ -83,7 +83,7 @@ MapObject overlayObject(const planes::Patch& patch, const planes::TextureBinding
 bool onAPatch(const Eigen::Vector3d& X, const std::vector<const planes::Patch*>& patches,
               double cell_m, double distance_m) {
   for (const planes::Patch* patch : patches) {
-    if (std::abs(patch->normal.dot(X) - patch->offset) > distance_m) continue;
+    if (std::abs(patch->normal().dot(X) - patch->offset()) > distance_m) continue;
     const planes::Cell c = patch->cellOf(X, cell_m);
     for (const auto& [di, dj] : {std::pair{0, 0}, {1, 0}, {-1, 0}, {0, 1}, {0, -1}}) {
       if (patch->cells.count({c.first + di, c.second + dj})) return true;

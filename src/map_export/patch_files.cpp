@@ -49,7 +49,7 @@ std::size_t writeOverlay(std::ofstream& out, const Patch& patch, const Patch::Fr
                      layer, overlay.texture_id);
   for (std::size_t i = 0; i < 4; ++i) {
     const Eigen::Vector3d X =
-        frame.at(quad.uv[i].x(), quad.uv[i].y()) - planes::kOverlayLift_m * patch.normal;
+        frame.at(quad.uv[i].x(), quad.uv[i].y()) - planes::kOverlayLift_m * patch.normal();
     out << fmt::format("v {:.4f} {:.4f} {:.4f}\nvt {:.5f} {:.5f}\n", X.x(), X.y(), X.z(),
                        quad.st[i].x(), quad.st[i].y());
   }
@@ -225,8 +225,8 @@ void writePatchesJson(const PatchMap& map, const std::filesystem::path& path,
                        {"plane", patch.plane},
                        {"tile", {patch.tile.first, patch.tile.second}},
                        {"version", patch.version},
-                       {"normal", vectorJson(patch.normal)},
-                       {"offset_m", patch.offset},
+                       {"normal", vectorJson(patch.normal())},
+                       {"offset_m", patch.offset()},
                        {"origin", vectorJson(frame.origin)},
                        {"u_axis", vectorJson(frame.u_axis)},
                        {"v_axis", vectorJson(frame.v_axis)},

@@ -83,19 +83,19 @@ std::optional<Eigen::Vector3f> PatchMap::addColours(const core::Frame& frame,
     const Patch* region = find(ids[r]);
     if (region == nullptr) continue;
     ColourTarget& target = targets[r];
-    for (Patch& tile : patches_) {
-      if (tile.plane == region->plane && !tile.spilled_samples) {
-        target.tiles.push_back({tile.tile, &tile});
-      }
+    const Plane& plane = planes_.at(region->plane);
+    for (Patch* tile : tilesOf(plane)) {
+      if (!tile->spilled_samples) target.tiles.push_back({tile->tile, tile});
     }
     if (target.tiles.empty()) continue;
-    target.grid = planes_.at(region->plane).grid;
+    const PlaneGeometry& geometry = *plane.geometry;
+    target.grid = plane.grid;
     target.cell_m = config_.cell_m;
-    target.n_C = (T_C_W.linear() * region->normal).cast<float>();
-    target.d_C = static_cast<float>(region->offset - region->normal.dot(T_W_C.translation()));
-    target.origin_C = (T_C_W * region->origin).cast<float>();
-    target.u_C = (T_C_W.linear() * region->u_axis).cast<float>();
-    target.v_C = (T_C_W.linear() * region->v_axis).cast<float>();
+    target.n_C = (T_C_W.linear() * geometry.normal).cast<float>();
+    target.d_C = static_cast<float>(geometry.offset - geometry.normal.dot(T_W_C.translation()));
+    target.origin_C = (T_C_W * geometry.origin).cast<float>();
+    target.u_C = (T_C_W.linear() * geometry.u_axis).cast<float>();
+    target.v_C = (T_C_W.linear() * geometry.v_axis).cast<float>();
     any = true;
   }
   if (!any) return std::nullopt;

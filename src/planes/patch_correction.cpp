@@ -18,36 +18,7 @@ namespace {
 constexpr double kMinMove_m = 0.002;
 constexpr double kMinTurn_deg = 0.05;
 
-// The moments of the points moved by `motion`: for X' = R X + t,
-// sum' = R sum + n t and outer' = R outer R^T + R sum t^T + t (R sum)^T + n t t^T.
-PointMoments moved(const PointMoments& m, const core::Isometry& motion) {
-  const Eigen::Matrix3d R = motion.linear();
-  const Eigen::Vector3d t = motion.translation();
-  const Eigen::Vector3d rotated_sum = R * m.sum;
-  PointMoments out;
-  out.count = m.count;
-  out.sum = rotated_sum + m.count * t;
-  out.outer = R * m.outer * R.transpose() + rotated_sum * t.transpose() +
-              t * rotated_sum.transpose() + m.count * t * t.transpose();
-  return out;
-}
-
 }  // namespace
-
-void PatchMap::movePlane(int plane_id, const core::Isometry& motion) {
-  PlaneState& plane = planes_.at(plane_id);
-  plane.moments = moved(plane.moments, motion);
-  const Eigen::Matrix3d R = motion.linear();
-  for (Patch& tile : patches_) {
-    if (tile.plane != plane_id) continue;
-    tile.origin = motion * tile.origin;
-    tile.u_axis = R * tile.u_axis;
-    tile.v_axis = R * tile.v_axis;
-    tile.normal = R * tile.normal;
-    // A point X of the plane (n . X = offset) moves to R X + t: n' . X' = offset + n' . t.
-    tile.offset += tile.normal.dot(motion.translation());
-  }
-}
 
 std::size_t PatchMap::followCorrection(
     const std::function<core::Isometry(std::int64_t keyframe_ns)>& motion_at) {
@@ -79,7 +50,7 @@ std::size_t PatchMap::followCorrection(
     core::Isometry motion = core::Isometry::Identity();
     motion.linear() = R;
     motion.translation() = centroid + shift / weight - R * centroid;
-    movePlane(plane_id, motion);
+    plane.move(motion);
     ++moved_planes;
   }
   return moved_planes;
@@ -92,8 +63,8 @@ std::optional<std::pair<int, int>> PatchMap::findCoinciding() const {
     if (newer->second.moments.count < 3.0) continue;
     const PlaneFit fit = fitPlane(newer->second.moments);
     std::vector<Eigen::Vector3d> centres;
-    for (const Patch& tile : patches_) {
-      if (tile.plane != from_id) continue;
+    for (const auto& [key, id] : newer->second.tiles) {
+      const Patch& tile = patches_.at(id);
       for (const Cell& cell : tile.cells) centres.push_back(tile.cellCentre(cell, config_.cell_m));
     }
     for (const auto& [into_id, older] : planes_) {
@@ -103,9 +74,10 @@ std::optional<std::pair<int, int>> PatchMap::findCoinciding() const {
       // fit is anchored (its centroid).
       const double bend_m = std::tan(config_.merge_bend_deg * M_PI / 180.0) *
                             (fit.centroid - fitPlane(older.moments).centroid).norm();
-      const bool continued = std::any_of(patches_.begin(), patches_.end(), [&](const Patch& tile) {
-        return tile.plane == into_id && continues(tile, fit, centres, bend_m);
-      });
+      const bool continued = std::any_of(
+          older.tiles.begin(), older.tiles.end(), [&](const std::pair<const Cell, int>& tile) {
+            return continues(patches_.at(tile.second), fit, centres, bend_m);
+          });
       if (continued) return std::make_pair(into_id, from_id);
     }
   }

@@ -21,7 +21,7 @@ void PatchMap::finalize(Patch& patch, std::vector<PatchEvent>& events) const {
 std::vector<PatchEvent> PatchMap::endFrame(long frame_index) {
   std::vector<PatchEvent> events = std::move(pending_);
   pending_.clear();
-  for (Patch& patch : patches_) {
+  for (auto& [id, patch] : patches_) {
     const double area = areaM2(patch);
     if (seen_this_frame_.count(patch.id) == 0) {
       const bool gone_long = frame_index - patch.last_seen_frame >= config_.out_of_view_frames;
@@ -60,7 +60,7 @@ void PatchMap::setSampleSpillDir(std::filesystem::path dir) {
 std::size_t PatchMap::releaseIdleSamples(long frame_index) {
   if (!spill_dir_ || config_.release_samples_after_frames <= 0 || spill_failed_) return 0;
   std::size_t released = 0;
-  for (Patch& patch : patches_) {
+  for (auto& [id, patch] : patches_) {
     if (!patch.finalized || patch.spilled_samples || patch.samples.size() == 0 ||
         frame_index - patch.last_seen_frame < config_.release_samples_after_frames) {
       continue;
@@ -98,7 +98,7 @@ void PatchMap::restoreSamples(Patch& patch) const {
 std::vector<PatchEvent> PatchMap::finalizeAll() {
   std::vector<PatchEvent> events = std::move(pending_);
   pending_.clear();
-  for (Patch& patch : patches_) {
+  for (auto& [id, patch] : patches_) {
     if (!patch.finalized && areaM2(patch) >= config_.min_area_m2) finalize(patch, events);
   }
   return events;

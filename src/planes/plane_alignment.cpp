@@ -50,7 +50,7 @@ std::optional<core::Isometry> alignToPatches(const PatchMap& map,
     if (observation.points_W.size() < 3) continue;
     const Patch* anchor = anchorFor(map, observation, config);
     if (anchor == nullptr) continue;
-    PlaneTerm term{anchor->normal, anchor->offset, {}};
+    PlaneTerm term{anchor->normal(), anchor->offset(), {}};
     const std::size_t stride =
         std::max<std::size_t>(1, observation.points_W.size() / config.points_per_region);
     for (std::size_t i = 0; i < observation.points_W.size(); i += stride) {

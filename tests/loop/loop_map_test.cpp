@@ -5,7 +5,6 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
-#include <set>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -28,17 +27,13 @@ struct PlaneFigure {
   double offset = 0.0;
 };
 
-// One entry per plane (its first tile), of planes of at least 0.3 m^2 in all.
+// One entry per plane of at least 0.3 m^2 in all its tiles.
 std::vector<PlaneFigure> planesOf(const planes::PatchMap& map) {
   std::vector<PlaneFigure> out;
-  std::set<int> seen;
-  for (const planes::Patch& patch : map.patches()) {
-    if (!seen.insert(patch.plane).second) continue;
+  for (const auto& [id, plane] : map.planes()) {
     double area = 0.0;
-    for (const planes::Patch& tile : map.patches()) {
-      if (tile.plane == patch.plane) area += map.areaM2(tile);
-    }
-    if (area >= 0.3) out.push_back({patch.normal, patch.offset});
+    for (const auto& [key, tile] : plane.tiles) area += map.areaM2(*map.find(tile));
+    if (area >= 0.3) out.push_back({plane.geometry->normal, plane.geometry->offset});
   }
   return out;
 }

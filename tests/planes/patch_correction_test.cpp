@@ -83,8 +83,8 @@ TEST(PatchCorrection, ADoubledWallMergesIntoOnePatchAfterTheLoopCloses) {
   EXPECT_EQ(map.followCorrection(motion_at), 1u);  // only the doubled wall moves
   ASSERT_EQ(map.patches().size(), 2u);
   const Patch& moved = map.patches()[1];
-  EXPECT_NEAR(std::abs(moved.offset), 1.5, 0.003);
-  EXPECT_NEAR(std::abs(moved.normal.z()), 1.0, 1e-6);
+  EXPECT_NEAR(std::abs(moved.offset()), 1.5, 0.003);
+  EXPECT_NEAR(std::abs(moved.normal().z()), 1.0, 1e-6);
   // The same correction again moves nothing.
   EXPECT_EQ(map.followCorrection(motion_at), 0u);
 
@@ -92,7 +92,7 @@ TEST(PatchCorrection, ADoubledWallMergesIntoOnePatchAfterTheLoopCloses) {
   ASSERT_EQ(map.patches().size(), 1u);
   const Patch& wall = map.patches().front();
   EXPECT_EQ(wall.id, first);
-  EXPECT_NEAR(std::abs(wall.offset), 1.5, 0.003);
+  EXPECT_NEAR(std::abs(wall.offset()), 1.5, 0.003);
   EXPECT_GT(map.areaM2(wall), first_area + 0.3);  // 0.4 m more along x, over > 1 m of height
   EXPECT_GT(wall.samples.size(), first_samples);
   EXPECT_FALSE(wall.finalized);

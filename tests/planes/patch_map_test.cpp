@@ -38,8 +38,8 @@ TEST(PatchMap, TheSamePlaneSeenAgainGrowsOnePatch) {
   map.add({strip(0.8, 1.8, 0.0, 1.0, 0.75, 0.005, 0.0, 2)});  // overlaps and extends it
   ASSERT_EQ(map.patches().size(), 1u);
   const Patch& patch = map.patches().front();
-  EXPECT_NEAR(std::abs(patch.normal.z()), 1.0, 1e-4);
-  EXPECT_NEAR(std::abs(patch.offset), 0.75, 0.002);
+  EXPECT_NEAR(std::abs(patch.normal().z()), 1.0, 1e-4);
+  EXPECT_NEAR(std::abs(patch.offset()), 0.75, 0.002);
   EXPECT_NEAR(map.areaM2(patch), 1.8, 0.2);  // 1.8 m x 1 m, to within the cell size
 }
 
@@ -69,7 +69,7 @@ TEST(PatchMap, TwoDisjointPartsThatLaterJoinBecomeOnePatch) {
   ASSERT_EQ(map.patches().size(), 1u);
   EXPECT_EQ(whole[0], std::min(left[0], right[0]));  // the older patch is kept
   EXPECT_NEAR(map.areaM2(map.patches().front()), 2.0 * 0.8, 0.2);
-  EXPECT_NEAR(std::abs(map.patches().front().offset), 0.75, 1e-6);
+  EXPECT_NEAR(std::abs(map.patches().front().offset()), 0.75, 1e-6);
 }
 
 TEST(PatchMap, RegionsOfARenderedPlaneBecomeWorldPoints) {
@@ -119,10 +119,10 @@ TEST(PatchMap, AWallPartlyHiddenByClutterIsOnePatchWithAHoleThatFillsInFromOther
   ASSERT_EQ(map.patches().size(), 2u);  // the wall and the box's face
   const Patch* wall = nullptr;
   for (const Patch& p : map.patches()) {
-    if (std::abs(std::abs(p.offset) - 2.0) < 0.01) wall = &p;
+    if (std::abs(std::abs(p.offset()) - 2.0) < 0.01) wall = &p;
   }
   ASSERT_NE(wall, nullptr);
-  EXPECT_NEAR(std::abs(wall->normal.z()), 1.0, 1e-4);
+  EXPECT_NEAR(std::abs(wall->normal().z()), 1.0, 1e-4);
   Outline outline = map.outlineOf(*wall);
   ASSERT_EQ(outline.parts.size(), 1u);
   ASSERT_EQ(outline.parts.front().holes.size(), 1u);
@@ -143,7 +143,7 @@ TEST(PatchMap, AWallPartlyHiddenByClutterIsOnePatchWithAHoleThatFillsInFromOther
   for (const Polygon2& hole : outline.parts.front().holes) still_hidden += polygonArea(hole);
   EXPECT_LT(still_hidden, 0.5 * hidden);
   std::size_t walls = 0;
-  for (const Patch& p : map.patches()) walls += std::abs(std::abs(p.offset) - 2.0) < 0.03 ? 1 : 0;
+  for (const Patch& p : map.patches()) walls += std::abs(std::abs(p.offset()) - 2.0) < 0.03 ? 1 : 0;
   EXPECT_EQ(walls, 1u);
 }
 
@@ -178,10 +178,8 @@ TEST(PatchTiles, AFloorLongerThanATileIsCutIntoTilesOfOnePlane) {
   std::set<Cell> all_cells;
   double area = 0.0;
   for (const Patch& tile : map.patches()) {
-    EXPECT_EQ(tile.plane, map.patches().front().id);
-    EXPECT_EQ(tile.normal, map.patches().front().normal);  // one plane, exactly
-    EXPECT_EQ(tile.offset, map.patches().front().offset);
-    EXPECT_EQ(tile.origin, map.patches().front().origin);  // one cell grid
+    EXPECT_EQ(tile.plane, map.patches().front().plane);
+    EXPECT_EQ(tile.geometry, map.patches().front().geometry);  // one plane, one cell grid
     const CellBounds b = boundsOf(tile);
     EXPECT_LE(b.max_u - b.min_u + 1, cells_per_tile);
     EXPECT_LE(b.max_v - b.min_v + 1, cells_per_tile);
@@ -189,7 +187,7 @@ TEST(PatchTiles, AFloorLongerThanATileIsCutIntoTilesOfOnePlane) {
     area += map.areaM2(tile);
   }
   EXPECT_NEAR(area, 14.0, 0.8);
-  EXPECT_NEAR(std::abs(map.patches().front().offset), 0.0, 0.002);
+  EXPECT_NEAR(std::abs(map.patches().front().offset()), 0.0, 0.002);
 }
 
 TEST(PatchTiles, ASurfaceNoLongerThanATileIsNeverCut) {
@@ -342,7 +340,8 @@ TEST(PatchColours, SamplesFromAFrameMatchTheColourOnThePlane) {
   EXPECT_LE(static_cast<double>(samples.size()), 1.2 * map.areaM2(patch) / (cell * cell));
   std::size_t matching = 0;
   for (const ColourSample& s : samples) {
-    const Eigen::Vector3d X = patch.origin + s.u * patch.u_axis + s.v * patch.v_axis;
+    const Eigen::Vector3d X =
+        patch.geometry->origin + s.u * patch.geometry->u_axis + s.v * patch.geometry->v_axis;
     const long parity = static_cast<long>(std::floor(X.x() * 10)) +
                         static_cast<long>(std::floor(X.y() * 10)) +
                         static_cast<long>(std::floor(X.z() * 10));

@@ -6,14 +6,17 @@
 // growing or leaves the view; a finalized patch that grows again is finalized anew as a
 // higher version of the same id. A plane larger than one tile (PatchMapConfig::tile_m) is cut
 // into tiles on a grid of its plane, each one a patch of its own: a growing floor re-textures
-// the tile that grows, not the whole building.
+// the tile that grows, not the whole building. A Plane (plane.h) owns its geometry, points,
+// tile grid and observers; a tile (Patch) owns its cells, colour samples and lifecycle.
 #include <array>
 #include <cstddef>
 #include <cstdint>
 #include <deque>
 #include <filesystem>
 #include <functional>
+#include <iterator>
 #include <map>
+#include <memory>
 #include <optional>
 #include <set>
 #include <utility>
@@ -25,6 +28,7 @@
 #include "tessera/core/pose.h"
 #include "tessera/planes/colour_samples.h"
 #include "tessera/planes/patch_outline.h"
+#include "tessera/planes/plane.h"
 #include "tessera/planes/plane_detector.h"
 #include "tessera/planes/plane_fit.h"
 
@@ -95,27 +99,13 @@ std::vector<PlaneObservation> observationsOf(const core::Frame& frame,
                                              const PlaneDetection& detection,
                                              const core::Isometry& T_W_C);
 
-// How a plane is cut into tiles: per axis (u, v), the cell index where tile 0 starts, set
-// once the plane outgrew one tile; before that one tile holds the whole plane on that axis.
-struct TileGrid {
-  int tile_cells = 0;  // tile side in cells; 0: never cut
-  std::array<std::optional<int>, 2> anchor;
-  Cell keyOf(const Cell& cell) const;
-  bool cut() const { return anchor[0].has_value() || anchor[1].has_value(); }
-};
-
-// One tile of a plane (the whole plane, if it is not cut).
+// One tile of a plane (the whole plane, if it is not cut): its cells, colours and lifecycle.
 struct Patch {
   int id = 0;
-  int plane = 0;    // the id of the plane's first tile; every tile of a plane shares it
+  int plane = 0;    // its plane's id (Plane::id)
   Cell tile{0, 0};  // the tile's key in its plane's TileGrid
-  Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();  // n . X = offset
-  double offset = 0.0;
-  // The plane, shared by its tiles. In-plane frame fixed when the plane is created: cells are
-  // indexed in (u, v) from origin.
-  Eigen::Vector3d origin = Eigen::Vector3d::Zero();
-  Eigen::Vector3d u_axis = Eigen::Vector3d::UnitX();
-  Eigen::Vector3d v_axis = Eigen::Vector3d::UnitY();
+  // The plane's geometry, as the plane keeps it (shared, read only here).
+  std::shared_ptr<const PlaneGeometry> geometry = std::make_shared<const PlaneGeometry>();
   CellSet cells;
   ColourSamples samples{PatchMapConfig{}.sample_cell_m};  // PatchMap sets its configured cell
   // Sum over every coloured pixel of its footprint on the plane (distance / fx, metres), for
@@ -138,16 +128,56 @@ struct Patch {
   long last_seen_frame = -1;
   int frames_seen = 0;
 
-  // The in-plane frame made exact for the refitted plane: origin moved onto it along the
-  // normal, axes made orthogonal to the normal. Cells and samples keep their (u, v).
-  struct Frame {
-    Eigen::Vector3d origin, u_axis, v_axis;
-    Eigen::Vector3d at(double u, double v) const { return origin + u * u_axis + v * v_axis; }
-  };
-  Frame planeFrame() const;
+  // The plane's, for the tile's users.
+  const Eigen::Vector3d& normal() const { return geometry->normal; }
+  double offset() const { return geometry->offset; }
+  using Frame = PlaneGeometry::Frame;
+  Frame planeFrame() const { return geometry->planeFrame(); }
+  Cell cellOf(const Eigen::Vector3d& X_W, double cell_m) const {
+    return geometry->cellOf(X_W, cell_m);
+  }
+  Eigen::Vector3d cellCentre(const Cell& cell, double cell_m) const {
+    return geometry->cellCentre(cell, cell_m);
+  }
+};
 
-  Cell cellOf(const Eigen::Vector3d& X_W, double cell_m) const;
-  Eigen::Vector3d cellCentre(const Cell& cell, double cell_m) const;
+// The tiles of a map in id order, as `const Patch&`.
+class TileRange {
+ public:
+  using Map = std::map<int, Patch>;
+  class Iterator {
+   public:
+    using iterator_category = std::forward_iterator_tag;
+    using value_type = Patch;
+    using difference_type = std::ptrdiff_t;
+    using pointer = const Patch*;
+    using reference = const Patch&;
+    explicit Iterator(Map::const_iterator it) : it_(it) {}
+    const Patch& operator*() const { return it_->second; }
+    const Patch* operator->() const { return &it_->second; }
+    Iterator& operator++() {
+      ++it_;
+      return *this;
+    }
+    bool operator==(const Iterator& other) const { return it_ == other.it_; }
+    bool operator!=(const Iterator& other) const { return it_ != other.it_; }
+
+   private:
+    Map::const_iterator it_;
+  };
+  explicit TileRange(const Map& tiles) : tiles_(tiles) {}
+  Iterator begin() const { return Iterator(tiles_.begin()); }
+  Iterator end() const { return Iterator(tiles_.end()); }
+  std::size_t size() const { return tiles_.size(); }
+  bool empty() const { return tiles_.empty(); }
+  const Patch& front() const { return tiles_.begin()->second; }
+  // The i-th tile in id order (walks the map: for tests and small maps).
+  const Patch& operator[](std::size_t i) const {
+    return std::next(tiles_.begin(), static_cast<long>(i))->second;
+  }
+
+ private:
+  const Map& tiles_;
 };
 
 // A finalized patch as the texturing stage needs it, copied so that it can be textured on
@@ -231,26 +261,12 @@ class PatchMap {
   std::size_t finalizedCount() const;  // finalized, in their current version
   Outline outlineOf(const Patch& patch) const { return traceOutline(patch.cells, config_.cell_m); }
 
-  const std::vector<Patch>& patches() const { return patches_; }
+  TileRange patches() const { return TileRange(patches_); }
+  const std::map<int, Plane>& planes() const { return planes_; }
   // Area covered by a patch's occupied cells, m^2.
   double areaM2(const Patch& patch) const;
 
  private:
-  // What a plane keeps beside its tiles.
-  struct PlaneState {
-    PointMoments moments;  // of every point ever added, for the least-squares refit
-    TileGrid grid;
-    Cell lo{0, 0}, hi{0, 0};  // bounds of every cell of every tile (once has_cells)
-    bool has_cells = false;
-    // By keyframe time: the points its frames gave, and the loop-closure motion they were
-    // placed with.
-    struct Observer {
-      double points = 0.0;
-      core::Isometry motion = core::Isometry::Identity();
-    };
-    std::map<std::int64_t, Observer> observers;
-  };
-
   // Adds a region's points to plane `plane_id`, cutting new tiles as they are needed; returns
   // the id of the tile that got most of them.
   int placePoints(int plane_id, const std::vector<Eigen::Vector3d>& points,
@@ -261,27 +277,25 @@ class PatchMap {
   std::set<int> mergePlane(int into_id, int from_id, std::vector<int>& ids);
   // A plane (second) that continues an older one (first), if any.
   std::optional<std::pair<int, int>> findCoinciding() const;
-  // Moves plane `plane_id` (its tiles' frames and planes, its moments) by `motion`.
-  void movePlane(int plane_id, const core::Isometry& motion);
   // Puts cells (in the plane's frame) into their tiles, which are created as needed and count
   // as seen this frame; returns the id of the tile that took most of them.
   int placeCells(int plane_id, const std::vector<Cell>& cells);
-  // Sets a grid anchor on each axis along which the plane, with `cells`, outgrows one tile.
-  void extendGrid(PlaneState& plane, const std::vector<Cell>& cells) const;
   Patch& tileAt(int plane_id, const Cell& key);
   Patch& patchWithId(int id);
-  void refitPlane(int plane_id);
+  // The plane's tiles, in id order.
+  std::vector<Patch*> tilesOf(const Plane& plane);
   void finalize(Patch& patch, std::vector<PatchEvent>& events) const;
   // Loads a released patch's samples back (a region continues it).
   void restoreSamples(Patch& patch) const;
 
   PatchMapConfig config_;
-  std::vector<Patch> patches_;
-  std::map<int, PlaneState> planes_;  // by plane id
+  std::map<int, Patch> patches_;  // the tiles, by patch id
+  std::map<int, Plane> planes_;   // by plane id
   std::set<int> seen_this_frame_;
   std::vector<PatchEvent> pending_;  // retirements from merges, reported by endFrame
   Eigen::Vector3f last_gain_ = Eigen::Vector3f::Ones();
-  int next_id_ = 0;
+  int next_id_ = 0;  // of tiles (patches)
+  int next_plane_id_ = 0;
   std::optional<std::filesystem::path> spill_dir_;
   std::size_t samples_released_ = 0;
   bool spill_failed_ = false;  // warned once
