@@ -10,20 +10,10 @@
 #include <opencv2/imgproc.hpp>
 
 #include "tessera/core/error.h"
+#include "tessera/match/fidelity.h"
 #include "tessera/pattern/pattern_extractor.h"
 
 namespace tessera::pattern {
-
-namespace {
-
-// x wrapped into [0, period), for x within a few periods of that range.
-double wrapNear(double x, double period) {
-  while (x >= period) x -= period;
-  while (x < 0.0) x += period;
-  return x;
-}
-
-}  // namespace
 
 void averageTile(const cv::Mat& rgb, const cv::Mat& mask, const core::Lattice2& lattice, int width,
                  int height, cv::Mat& tile_rgb, cv::Mat& tile_mask, int max_repetitions) {
@@ -136,89 +126,28 @@ TilingError tilingError(const cv::Mat& rgb, const cv::Mat& mask, const cv::Mat& 
       !(lattice.cellArea() > 1e-9)) {
     throw core::Error("tilingError: needs a CV_8UC3 tile, its mask and a non-degenerate lattice");
   }
+  // The tiling as the map shows it (the bitmap is the pattern's frame: identity); a full tile
+  // is resampled without its mask, which would only cost the renormalisation.
+  const bool full_tile = cv::countNonZero(tile_mask) == static_cast<int>(tile_mask.total());
+  const match::Rendered tiling = match::renderPattern(tile_rgb, full_tile ? cv::Mat() : tile_mask,
+                                                      lattice, {}, rgb.cols, rgb.rows);
   TilingError out{cv::Mat(rgb.size(), CV_32FC1, cv::Scalar(0)),
                   cv::Mat(rgb.size(), CV_8UC1, cv::Scalar(0))};
-  const int tw = tile_rgb.cols, th = tile_rgb.rows;
-  const Eigen::Matrix2d to_lattice = lattice.basis().inverse();
-  // Tile pixel coordinates are affine in the bitmap's: (u, v) = A (col, row).
-  const double du_col = to_lattice(0, 0) * tw, du_row = to_lattice(0, 1) * tw;
-  const double dv_col = to_lattice(1, 0) * th, dv_row = to_lattice(1, 1) * th;
-  const bool full_tile = cv::countNonZero(tile_mask) == static_cast<int>(tile_mask.total());
-  if (full_tile) {
-    // The tile coordinates wrapped into it, then OpenCV's bilinear resampling (its wrap
-    // border serves the taps across the tile's edge).
-    cv::Mat map_x(rgb.size(), CV_32FC1), map_y(rgb.size(), CV_32FC1);
-    for (int row = 0; row < rgb.rows; ++row) {
-      auto* mx = map_x.ptr<float>(row);
-      auto* my = map_y.ptr<float>(row);
-      double u = row * du_row, v = row * dv_row;
-      u -= std::floor(u / tw) * tw;
-      v -= std::floor(v / th) * th;
-      for (int col = 0; col < rgb.cols;
-           ++col, u = wrapNear(u + du_col, tw), v = wrapNear(v + dv_col, th)) {
-        mx[col] = static_cast<float>(u);
-        my[col] = static_cast<float>(v);
-      }
-    }
-    cv::Mat tiled;
-    cv::remap(tile_rgb, tiled, map_x, map_y, cv::INTER_LINEAR, cv::BORDER_WRAP);
-    for (int row = 0; row < rgb.rows; ++row) {
-      const auto* bitmap = rgb.ptr<cv::Vec3b>(row);
-      const auto* tiling = tiled.ptr<cv::Vec3b>(row);
-      const std::uint8_t* inside = mask.empty() ? nullptr : mask.ptr<std::uint8_t>(row);
-      auto* error = out.error.ptr<float>(row);
-      auto* valid = out.valid.ptr<std::uint8_t>(row);
-      for (int col = 0; col < rgb.cols; ++col) {
-        if (inside != nullptr && inside[col] == 0) continue;
-        int sum = 0;
-        for (int c = 0; c < 3; ++c) {
-          const int d = bitmap[col][c] - tiling[col][c];
-          sum += d * d;
-        }
-        error[col] = std::sqrt(static_cast<float>(sum) * (1.0f / 3.0f));
-        valid[col] = 255;
-      }
-    }
-    return out;
-  }
   for (int row = 0; row < rgb.rows; ++row) {
     const auto* bitmap = rgb.ptr<cv::Vec3b>(row);
+    const auto* tiled = tiling.rgb.ptr<cv::Vec3b>(row);
+    const auto* covered = tiling.covered.ptr<std::uint8_t>(row);
     const std::uint8_t* inside = mask.empty() ? nullptr : mask.ptr<std::uint8_t>(row);
     auto* error = out.error.ptr<float>(row);
     auto* valid = out.valid.ptr<std::uint8_t>(row);
-    // Stepped along the row and wrapped at every step (exact at the row's start).
-    double u = row * du_row, v = row * dv_row;
-    u -= std::floor(u / tw) * tw;
-    v -= std::floor(v / th) * th;
-    for (int col = 0; col < rgb.cols;
-         ++col, u = wrapNear(u + du_col, tw), v = wrapNear(v + dv_col, th)) {
-      if (inside != nullptr && inside[col] == 0) continue;
-      const int x0 = std::min(static_cast<int>(u), tw - 1),
-                y0 = std::min(static_cast<int>(v), th - 1);
-      const int x1 = x0 + 1 == tw ? 0 : x0 + 1, y1 = y0 + 1 == th ? 0 : y0 + 1;
-      const auto fx = static_cast<float>(u - x0), fy = static_cast<float>(v - y0);
-      std::array<float, 4> w{(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy};
-      // Covered when the nearest texel is valid; the bilinear weights over the valid ones.
-      const int nx = fx < 0.5f ? x0 : x1, ny = fy < 0.5f ? y0 : y1;
-      if (tile_mask.at<std::uint8_t>(ny, nx) == 0) continue;
-      const std::array<int, 4> xs{x0, x1, x0, x1}, ys{y0, y0, y1, y1};
-      float weight = 0.0f;
-      for (std::size_t k = 0; k < 4; ++k) {
-        if (tile_mask.at<std::uint8_t>(ys[k], xs[k]) == 0) w[k] = 0.0f;
-        weight += w[k];
-      }
-      for (float& x : w) x /= weight;
-      const auto* t0 = tile_rgb.ptr<cv::Vec3b>(y0);
-      const auto* t1 = tile_rgb.ptr<cv::Vec3b>(y1);
-      float sum = 0.0f;
+    for (int col = 0; col < rgb.cols; ++col) {
+      if ((inside != nullptr && inside[col] == 0) || covered[col] == 0) continue;
+      int sum = 0;
       for (int c = 0; c < 3; ++c) {
-        // The tiling's colour rounded to a grey level, as a rendered tile would hold it.
-        const float tiled = static_cast<float>(static_cast<int>(
-            w[0] * t0[x0][c] + w[1] * t0[x1][c] + w[2] * t1[x0][c] + w[3] * t1[x1][c] + 0.5f));
-        const float d = static_cast<float>(bitmap[col][c]) - tiled;
+        const int d = bitmap[col][c] - tiled[col][c];
         sum += d * d;
       }
-      error[col] = std::sqrt(sum / 3.0f);
+      error[col] = std::sqrt(static_cast<float>(sum) * (1.0f / 3.0f));
       valid[col] = 255;
     }
   }

@@ -7,10 +7,10 @@
 
 namespace tessera::pattern {
 
-// How far the tiling of a cell's tile lies from the bitmap, texel by texel. Bitmap point q
-// lies at tile pixel (c1 W, c2 H), c = L^-1 q wrapped into the cell (the convention of
-// match::renderPattern through the identity); the tiling's colour there is the bilinear mean
-// of the valid tile texels around that point, the tile wrapping at its edges.
+// How far the tiling of a cell's tile lies from the bitmap, texel by texel: the tiling is
+// match::renderPattern's through the identity (bitmap point q lies at tile pixel (c1 W, c2 H),
+// c = L^-1 q wrapped into the cell; its colour is the bilinear mean of the valid tile texels
+// around that point, the tile wrapping at its edges).
 struct TilingError {
   cv::Mat error;  // CV_32FC1, RMS over the channels of bitmap - tiling; 0 where not compared
   cv::Mat valid;  // CV_8UC1, 255 where compared: a valid bitmap texel whose nearest tile
