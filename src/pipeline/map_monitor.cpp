@@ -2,7 +2,12 @@
 
 #include <fmt/format.h>
 
+#include "internal/json_values.h"
+
 namespace tessera::pipeline {
+
+using internal::orNull;
+using internal::ratio;
 
 void RecentMean::add(double x) {
   value = seen ? value + (x - value) / 16.0 : x;
@@ -88,15 +93,6 @@ namespace {
 
 nlohmann::json optionalMean(const RecentMean& mean) {
   return mean.seen ? nlohmann::json(mean.value) : nlohmann::json(nullptr);
-}
-
-std::optional<double> ratio(std::size_t numerator, std::size_t denominator) {
-  if (denominator == 0) return std::nullopt;
-  return static_cast<double>(numerator) / static_cast<double>(denominator);
-}
-
-nlohmann::json orNull(const std::optional<double>& v) {
-  return v ? nlohmann::json(*v) : nlohmann::json(nullptr);
 }
 
 }  // namespace

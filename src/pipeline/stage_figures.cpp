@@ -4,20 +4,14 @@
 #include <cmath>
 #include <numeric>
 
+#include "internal/json_values.h"
+
 namespace tessera::pipeline {
 
 using nlohmann::json;
 
-namespace {
-
-json orNull(const std::optional<double>& value) { return value ? json(*value) : json(nullptr); }
-
-json ratio(std::size_t numerator, std::size_t denominator) {
-  return denominator > 0 ? json(static_cast<double>(numerator) / static_cast<double>(denominator))
-                         : json(nullptr);
-}
-
-}  // namespace
+using internal::orNull;
+using internal::ratio;
 
 std::optional<double> percentile(std::vector<double> values, double p) {
   if (values.empty()) return std::nullopt;
@@ -57,7 +51,7 @@ void SourceFigures::addTo(json& report) const {
   report["stopped_on_request"] = stopped_on_request;
   report["frames_delivered"] = live ? json(live_stats.frames_delivered) : json(nullptr);
   report["drop_rate"] =
-      live ? ratio(live_stats.frames_dropped, live_stats.frames_delivered) : json(nullptr);
+      live ? orNull(ratio(live_stats.frames_dropped, live_stats.frames_delivered)) : json(nullptr);
   report["device_losses"] = live_stats.device_losses;
   report["device_reconnects"] = live_stats.reconnects;
   report["source_end_problem"] = end_problem.empty() ? json(nullptr) : json(end_problem);
@@ -113,7 +107,7 @@ void CommitFigures::addTo(json& report) const {
   report["patterns_stored"] = patterns_stored;
   report["commit_failures"] = commit_failures;
   report["ccv_considered"] = ccv_considered;
-  report["ccv_rejection"] = ratio(ccv_removed, ccv_considered);
+  report["ccv_rejection"] = orNull(ratio(ccv_removed, ccv_considered));
   report["commit_latency_ms_p50"] = orNull(percentile(commit_latencies_ms, 0.50));
   report["commit_latency_ms_p95"] = orNull(percentile(commit_latencies_ms, 0.95));
   report["db_commit_ms_p50"] = orNull(percentile(store_commit_ms, 0.50));
@@ -127,10 +121,10 @@ void addEconomy(const reuse::Economy& economy, json& report) {
   report["overlays"] = economy.overlays;
   report["textured_patches"] = economy.textured_patches;
   report["reuses"] = economy.reuses;
-  report["reuse_rate"] = ratio(economy.reuses, economy.textured_patches);
+  report["reuse_rate"] = orNull(ratio(economy.reuses, economy.textured_patches));
   report["bytes_before"] = 3 * economy.pixels_before;
   report["bytes_after"] = 3 * economy.pixels_after;
-  report["compression"] = ratio(economy.pixels_before, economy.pixels_after);
+  report["compression"] = orNull(ratio(economy.pixels_before, economy.pixels_after));
   // The fidelity of the patches shown through another image than their own bitmap.
   std::vector<double> psnrs = economy.shown_psnrs_db;
   std::sort(psnrs.begin(), psnrs.end());
