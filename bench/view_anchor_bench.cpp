@@ -308,22 +308,35 @@ int run(const Arguments& args) {
       "held-out views, {} pixels; {:.1f} s)\n",
       evaluation.viewCount(false), evaluation.pixels(false), evaluation.viewCount(true),
       evaluation.pixels(true), evaluation_s);
-  fmt::print("  {:<16} {:>9} {:>12} {:>17} {:>20} {:>9}\n", "model", "train dB", "held-out dB",
-             "train vs patches", "held-out vs patches", "vertices");
+  fmt::print("  {:<16} {:>9} {:>12} {:>17} {:>20} {:>6} {:>7} {:>7} {:>7} {:>9}\n", "model",
+             "train dB", "held-out dB", "train vs patches", "held-out vs patches", "SSIM", "detail",
+             "corr", "energy", "vertices");
   nlohmann::json json_models = nlohmann::json::object();
   for (std::size_t m = 0; m < models.size(); ++m) {
     const auto train = evaluation.meanPsnr(m, false);
     const auto held = evaluation.meanPsnr(m, true);
     const auto train_delta = difference(train, evaluation.meanPsnr(0, false));
     const auto held_delta = difference(held, evaluation.meanPsnr(0, true));
+    // Over the training views, as view PSNR's train column.
+    using tessera::eval::ImageSimilarity;
+    const auto ssim = evaluation.mean(m, false, &ImageSimilarity::ssim);
+    const auto detail = evaluation.mean(m, false, &ImageSimilarity::detail);
+    const auto correlation = evaluation.mean(m, false, &ImageSimilarity::detail_correlation);
+    const auto energy = evaluation.mean(m, false, &ImageSimilarity::detail_energy_ratio);
     const std::size_t vertices = models[m].mesh->vertices.size();
-    fmt::print("  {:<16} {:>9} {:>12} {:>17} {:>20} {:>9}\n", models[m].name, cell(train, "{:.2f}"),
-               cell(held, "{:.2f}"), cell(train_delta, "{:+.2f}"), cell(held_delta, "{:+.2f}"),
+    fmt::print("  {:<16} {:>9} {:>12} {:>17} {:>20} {:>6} {:>7} {:>7} {:>7} {:>9}\n",
+               models[m].name, cell(train, "{:.2f}"), cell(held, "{:.2f}"),
+               cell(train_delta, "{:+.2f}"), cell(held_delta, "{:+.2f}"), cell(ssim, "{:.3f}"),
+               cell(detail, "{:.3f}"), cell(correlation, "{:.3f}"), cell(energy, "{:.2f}"),
                vertices);
     json_models[models[m].name] = {{"psnr_mean", orNull(train)},
                                    {"psnr_holdout_mean", orNull(held)},
                                    {"delta_to_patches_db", orNull(train_delta)},
                                    {"delta_to_patches_holdout_db", orNull(held_delta)},
+                                   {"ssim_mean", orNull(ssim)},
+                                   {"detail_mean", orNull(detail)},
+                                   {"detail_correlation_mean", orNull(correlation)},
+                                   {"detail_energy_ratio_mean", orNull(energy)},
                                    {"vertices", vertices},
                                    {"triangles", models[m].mesh->triangles.size()}};
   }

@@ -75,34 +75,13 @@ std::size_t strideFor(std::size_t total, int wanted) {
 
 }  // namespace
 
-std::optional<double> maskedPsnr(const cv::Mat& rendered, const cv::Mat& captured,
-                                 const cv::Mat& mask) {
-  double squared = 0.0;
-  std::size_t count = 0;
-  for (int y = 0; y < mask.rows; ++y) {
-    const auto* a = rendered.ptr<cv::Vec3b>(y);
-    const auto* b = captured.ptr<cv::Vec3b>(y);
-    const auto* m = mask.ptr<std::uint8_t>(y);
-    for (int x = 0; x < mask.cols; ++x) {
-      if (m[x] == 0) continue;
-      for (int c = 0; c < 3; ++c) {
-        const double d = static_cast<double>(a[x][c]) - static_cast<double>(b[x][c]);
-        squared += d * d;
-      }
-      count += 3;
-    }
-  }
-  if (count == 0) return std::nullopt;
-  const double mse = squared / static_cast<double>(count);
-  return mse <= 0.0 ? 99.0 : 10.0 * std::log10(255.0 * 255.0 / mse);
-}
-
-std::optional<double> ViewEvaluation::meanPsnr(std::size_t model, bool held_out) const {
+std::optional<double> ViewEvaluation::mean(std::size_t model, bool held_out,
+                                           double ImageSimilarity::*figure) const {
   double sum = 0.0;
   std::size_t n = 0;
   for (const ViewScore& view : views) {
     if (view.held_out != held_out) continue;
-    sum += view.psnr.at(model);
+    sum += view.similarity.at(model).*figure;
     ++n;
   }
   if (n == 0) return std::nullopt;
@@ -185,7 +164,7 @@ ViewEvaluation evaluateViews(const std::vector<ViewModel>& models, core::FrameSo
     score.pixels = static_cast<std::size_t>(cv::countNonZero(mask));
     if (score.pixels < options.min_pixels) continue;
     for (const ViewImage& render : renders) {
-      score.psnr.push_back(*maskedPsnr(render.rgb, frame.rgb, mask));
+      score.similarity.push_back(*compareImages(render.rgb, frame.rgb, mask));
     }
     const std::size_t scored = evaluation.views.size();
     if (!options.save_dir.empty() && saved < options.save_views &&
@@ -197,29 +176,49 @@ ViewEvaluation evaluateViews(const std::vector<ViewModel>& models, core::FrameSo
       }
       ++saved;
     }
-    spdlog::debug("view {}{}: {} pixels, {:.2f} dB ({})", frame.index,
-                  held_out ? " (held out)" : "", score.pixels, score.psnr[0], models[0].name);
+    spdlog::debug("view {}{}: {} pixels, {:.2f} dB, SSIM {:.3f}, detail {:.3f} ({})", frame.index,
+                  held_out ? " (held out)" : "", score.pixels, score.similarity[0].psnr_db,
+                  score.similarity[0].ssim, score.similarity[0].detail, models[0].name);
     evaluation.views.push_back(std::move(score));
   }
   return evaluation;
 }
+
+namespace {
+
+struct NamedFigure {
+  const char* name;
+  double ImageSimilarity::*figure;
+  bool held_out;  // also over the held-out views
+};
+constexpr NamedFigure kFigures[] = {
+    {"psnr", &ImageSimilarity::psnr_db, true},
+    {"ssim", &ImageSimilarity::ssim, true},
+    {"detail", &ImageSimilarity::detail, true},
+    {"detail_correlation", &ImageSimilarity::detail_correlation, false},
+    {"detail_energy_ratio", &ImageSimilarity::detail_energy_ratio, false}};
+
+}  // namespace
 
 nlohmann::json viewFigures(const ViewEvaluation& evaluation) {
   const auto figure = [](std::optional<double> value) {
     return value ? nlohmann::json(*value) : nlohmann::json(nullptr);
   };
   const bool has_baseline = evaluation.models.size() > 1;
-  nlohmann::json figures = {
-      {"view_psnr_mean", figure(evaluation.meanPsnr(0, false))},
-      {"view_psnr_baseline_mean",
-       has_baseline ? figure(evaluation.meanPsnr(1, false)) : nlohmann::json(nullptr)},
-      {"view_psnr_holdout_mean", figure(evaluation.meanPsnr(0, true))},
-      {"view_psnr_baseline_holdout_mean",
-       has_baseline ? figure(evaluation.meanPsnr(1, true)) : nlohmann::json(nullptr)},
-      {"view_pixels", evaluation.pixels(false)},
-      {"view_pixels_holdout", evaluation.pixels(true)},
-      {"view_frames", evaluation.viewCount(false)},
-      {"view_frames_holdout", evaluation.viewCount(true)}};
+  nlohmann::json figures = {{"view_pixels", evaluation.pixels(false)},
+                            {"view_pixels_holdout", evaluation.pixels(true)},
+                            {"view_frames", evaluation.viewCount(false)},
+                            {"view_frames_holdout", evaluation.viewCount(true)}};
+  for (const NamedFigure& f : kFigures) {
+    const std::string key = fmt::format("view_{}", f.name);
+    for (const bool held_out : {false, true}) {
+      if (held_out && !f.held_out) continue;
+      const std::string suffix = held_out ? "_holdout_mean" : "_mean";
+      figures[key + suffix] = figure(evaluation.mean(0, held_out, f.figure));
+      figures[key + "_baseline" + suffix] =
+          has_baseline ? figure(evaluation.mean(1, held_out, f.figure)) : nlohmann::json(nullptr);
+    }
+  }
   return figures;
 }
 

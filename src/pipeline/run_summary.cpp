@@ -92,7 +92,10 @@ nlohmann::json reportJson(const RunSummary& summary) {
   // them.
   for (const char* key :
        {"view_psnr_mean", "view_psnr_baseline_mean", "view_psnr_holdout_mean",
-        "view_psnr_baseline_holdout_mean", "view_pixels", "plane_recall", "plane_precision",
+        "view_psnr_baseline_holdout_mean", "view_ssim_mean", "view_ssim_baseline_mean",
+        "view_ssim_holdout_mean", "view_ssim_baseline_holdout_mean", "view_detail_mean",
+        "view_detail_baseline_mean", "view_detail_holdout_mean",
+        "view_detail_baseline_holdout_mean", "view_pixels", "plane_recall", "plane_precision",
         "false_match_rate", "missed_match_rate", "economy", "gt_psnr_mean"}) {
     report[key] = nullptr;
   }

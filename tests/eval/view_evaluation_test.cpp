@@ -130,9 +130,24 @@ TEST(ViewEvaluation, AFaithfulMapScoresHighAndOneShiftedByACentimetreScoresLower
   for (std::size_t i = 0; i < swapped.views.size(); ++i) {
     EXPECT_GT(evaluation.views[i].pixels, 200'000u);
     EXPECT_EQ(swapped.views[i].pixels, evaluation.views[i].pixels);
-    EXPECT_DOUBLE_EQ(swapped.views[i].psnr[0], evaluation.views[i].psnr[1]);
-    EXPECT_DOUBLE_EQ(swapped.views[i].psnr[1], evaluation.views[i].psnr[0]);
+    EXPECT_DOUBLE_EQ(swapped.views[i].similarity[0].psnr_db,
+                     evaluation.views[i].similarity[1].psnr_db);
+    EXPECT_DOUBLE_EQ(swapped.views[i].similarity[1].psnr_db,
+                     evaluation.views[i].similarity[0].psnr_db);
   }
+  // Structure and detail say the same: the faithful map keeps the stripes where they were
+  // seen, the shifted one puts them a quarter period off.
+  const auto ssim = [&](std::size_t m) {
+    return *evaluation.mean(m, false, &ImageSimilarity::ssim);
+  };
+  const auto detail = [&](std::size_t m) {
+    return *evaluation.mean(m, false, &ImageSimilarity::detail);
+  };
+  EXPECT_GT(ssim(0), 0.95);
+  EXPECT_LT(ssim(1), ssim(0) - 0.3);
+  EXPECT_GT(detail(0), 0.95);
+  // The stripes along y are not moved by a shift in x: their part of the detail stays.
+  EXPECT_LT(detail(1), detail(0) - 0.3);
 }
 
 TEST(ViewEvaluation, HeldOutFramesAreScoredApartAndPixelsInFrontOfTheMapAreNotCompared) {

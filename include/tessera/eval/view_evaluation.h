@@ -1,6 +1,7 @@
 #pragma once
-// View PSNR (docs/METRICS.md): a run's textured patches rendered from the run's own camera
-// poses into the captured colour frames, compared over the pixels the patches cover, beside
+// View PSNR, SSIM and detail (docs/METRICS.md, image_similarity.h): a run's textured patches
+// rendered from the run's own camera poses into the captured colour frames, compared over the
+// pixels the patches cover, beside
 // other models (the run's vertex-coloured TSDF mesh; in bench/, Open3D's meshes) rendered the
 // same way and compared over exactly the same pixels.
 #include <cstddef>
@@ -14,6 +15,7 @@
 
 #include "tessera/core/frame_source.h"
 #include "tessera/core/trajectory.h"
+#include "tessera/eval/image_similarity.h"
 #include "tessera/eval/view_render.h"
 
 namespace tessera::eval {
@@ -50,15 +52,20 @@ struct ViewScore {
   std::uint64_t index = 0;
   std::int64_t timestamp_ns = 0;
   bool held_out = false;
-  std::size_t pixels = 0;    // compared, the same for every model
-  std::vector<double> psnr;  // per model, dB
+  std::size_t pixels = 0;                   // compared, the same for every model
+  std::vector<ImageSimilarity> similarity;  // per model
 };
 
 struct ViewEvaluation {
   std::vector<std::string> models;
   std::vector<ViewScore> views;
-  // Mean over the scored views (training or held-out) of model m's PSNR; nothing without views.
-  std::optional<double> meanPsnr(std::size_t model, bool held_out) const;
+  // Mean over the scored views (training or held-out) of one of model m's figures; nothing
+  // without views.
+  std::optional<double> mean(std::size_t model, bool held_out,
+                             double ImageSimilarity::*figure) const;
+  std::optional<double> meanPsnr(std::size_t model, bool held_out) const {
+    return mean(model, held_out, &ImageSimilarity::psnr_db);
+  }
   std::size_t pixels(bool held_out) const;
   std::size_t viewCount(bool held_out) const;
 };
@@ -71,15 +78,11 @@ struct ViewEvaluation {
 ViewEvaluation evaluateViews(const std::vector<ViewModel>& models, core::FrameSource& frames,
                              const core::Trajectory& poses, const ViewEvaluationOptions& options);
 
-// The report.json keys of docs/METRICS.md for a run evaluated as {patches, mesh}:
-// view_psnr_mean, view_psnr_baseline_mean, view_psnr_holdout_mean,
-// view_psnr_baseline_holdout_mean, view_pixels, view_pixels_holdout, view_frames,
-// view_frames_holdout (null where there are no views).
+// The report.json keys of docs/METRICS.md for a run evaluated as {patches, mesh}: for each
+// figure F of psnr, ssim and detail, view_F_mean, view_F_baseline_mean, view_F_holdout_mean
+// and view_F_baseline_holdout_mean; view_detail_correlation_mean and
+// view_detail_energy_ratio_mean with their baseline_ variants; view_pixels,
+// view_pixels_holdout, view_frames, view_frames_holdout (null where there are no views).
 nlohmann::json viewFigures(const ViewEvaluation& evaluation);
-
-// Peak signal-to-noise ratio in dB of 8-bit RGB `rendered` against `captured` over `mask`
-// (CV_8UC1); nothing when the mask is empty. Identical pixels give 99 dB, not infinity.
-std::optional<double> maskedPsnr(const cv::Mat& rendered, const cv::Mat& captured,
-                                 const cv::Mat& mask);
 
 }  // namespace tessera::eval
