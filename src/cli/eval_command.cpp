@@ -32,7 +32,8 @@ CLI::App* addEvalCommand(CLI::App& app, EvalArguments& args) {
   eval->add_option("GT", args.ground_truth, "Ground-truth file, e.g. recordings/office.gt.json")
       ->check(CLI::ExistingFile);
   eval->add_option("--frames", args.frames,
-                   "View PSNR, SSIM and detail: render patches.obj and mesh.ply at the run's poses into the frames "
+                   "View PSNR, SSIM and detail: render patches.obj and mesh.ply at the run's poses "
+                   "into the frames "
                    "of this source (the one the run read, with the same --depth-scale and "
                    "--intrinsics) and compare over the same pixels");
   eval->add_option("--map", args.map_file,
