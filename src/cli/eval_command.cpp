@@ -52,6 +52,12 @@ CLI::App* addEvalCommand(CLI::App& app, EvalArguments& args) {
                    "pixel whose captured depth disagrees with the map) are not compared")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
+  eval->add_option("--pose-time", args.pose_time,
+                   "With --frames: render each view at the pose of its colour image's time "
+                   "(interpolated; sources without colour time stamps fall back to depth) or of "
+                   "its depth image's")
+      ->check(CLI::IsMember({"colour", "depth"}))
+      ->capture_default_str();
   eval->add_option("--plane-offset-m", args.plane_offset_m,
                    "With GT: a patch matches a true plane with its centroid this close to it "
                    "(metres) ...")
@@ -83,6 +89,7 @@ int evalCommand(const EvalArguments& args) {
       eval::ViewEvaluationOptions options;
       options.max_views = args.max_views;
       options.edge_margin_px = args.edge_margin_px;
+      options.colour_time = args.pose_time == "colour";
       options.save_dir = args.save_dir;
       options.map_file = args.map_file;
       printFigures(eval::evaluateRunViews(args.run_dir, *source, options));

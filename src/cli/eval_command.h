@@ -18,6 +18,7 @@ struct EvalArguments {
   std::string map_file = "patches.obj";  // --map
   int max_views = 20;
   int edge_margin_px = eval::ViewEvaluationOptions{}.edge_margin_px;
+  std::string pose_time = "colour";  // --pose-time: colour or depth
   double plane_offset_m = eval::PlaneEvaluationOptions{}.max_offset_m;      // --plane-offset-m
   double plane_normal_deg = eval::PlaneEvaluationOptions{}.max_normal_deg;  // --plane-normal-deg
   SourceArguments source_args;

@@ -38,6 +38,19 @@ std::string tumLine(std::int64_t timestamp_ns, const core::Isometry& T_W_C) {
                      p.z(), q.x(), q.y(), q.z(), q.w());
 }
 
+std::optional<core::Isometry> poseAt(const Trajectory& trajectory, std::int64_t t_ns,
+                                     std::int64_t max_gap_ns) {
+  const auto after = trajectory.lower_bound(t_ns);
+  if (after == trajectory.end()) return std::nullopt;
+  if (after->first == t_ns) return after->second;
+  if (after == trajectory.begin()) return std::nullopt;
+  const auto before = std::prev(after);
+  const std::int64_t gap = after->first - before->first;
+  if (gap > max_gap_ns) return std::nullopt;
+  const double alpha = static_cast<double>(t_ns - before->first) / static_cast<double>(gap);
+  return core::interpolate(before->second, after->second, alpha);
+}
+
 void writeTumTrajectory(const Trajectory& trajectory, const std::filesystem::path& path) {
   std::ofstream out(path);
   out << "# timestamp tx ty tz qx qy qz qw\n";

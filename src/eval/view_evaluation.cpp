@@ -16,11 +16,22 @@ namespace tessera::eval {
 namespace {
 
 constexpr std::int64_t kMaxPoseGapNs = 1'000'000;  // a pose belongs to a frame within 1 ms
+// Colour times are interpolated between the frames' poses up to this far apart (a few frames).
+constexpr std::int64_t kMaxInterpolationGapNs = 100'000'000;
 
 std::optional<core::Isometry> poseAt(const core::Trajectory& poses, std::int64_t timestamp_ns) {
   auto it = poses.lower_bound(timestamp_ns - kMaxPoseGapNs);
   if (it == poses.end() || it->first > timestamp_ns + kMaxPoseGapNs) return std::nullopt;
   return it->second;
+}
+
+// The pose `frame` is rendered at: at its colour image's time when asked and known.
+std::optional<core::Isometry> viewPose(const core::Trajectory& poses, const core::Frame& frame,
+                                       bool colour_time) {
+  if (colour_time && frame.colour_timestamp_ns) {
+    return core::poseAt(poses, *frame.colour_timestamp_ns, kMaxInterpolationGapNs);
+  }
+  return poseAt(poses, frame.timestamp_ns);
 }
 
 // Pixels where the first model drew something that the captured depth confirms.
@@ -96,6 +107,13 @@ std::size_t ViewEvaluation::pixels(bool held_out) const {
   return total;
 }
 
+std::string ViewEvaluation::poseTime() const {
+  const auto at_colour = std::count_if(views.begin(), views.end(),
+                                       [](const ViewScore& v) { return v.at_colour_time; });
+  if (at_colour == 0) return "depth";
+  return static_cast<std::size_t>(at_colour) == views.size() ? "colour" : "mixed";
+}
+
 std::size_t ViewEvaluation::viewCount(bool held_out) const {
   return static_cast<std::size_t>(std::count_if(
       views.begin(), views.end(), [&](const ViewScore& v) { return v.held_out == held_out; }));
@@ -125,6 +143,7 @@ ViewEvaluation evaluateViews(const std::vector<ViewModel>& models, core::FrameSo
     held_out_stride = strideFor(held_out, options.max_views);
   }
   std::size_t seen[2] = {0, 0};  // training, held-out frames met so far
+  bool said_no_colour_time = false;
   int saved = 0;
   const int save_every = std::max(1, options.max_views / std::max(1, options.save_views));
 
@@ -141,9 +160,15 @@ ViewEvaluation evaluateViews(const std::vector<ViewModel>& models, core::FrameSo
     const bool held_out = core::isHeldOut(frame.index, options.holdout_every);
     const std::size_t position = seen[held_out ? 1 : 0]++;
     if (position % (held_out ? held_out_stride : train_stride) != 0) continue;
+    if (options.colour_time && !frame.colour_timestamp_ns && !said_no_colour_time) {
+      spdlog::info("{}: no colour time stamps; views are rendered at the depth image's pose",
+                   frames.name());
+      said_no_colour_time = true;
+    }
     std::vector<core::Isometry> T_W_C;  // per model
     for (const ViewModel& model : models) {
-      const auto pose = poseAt(model.poses != nullptr ? *model.poses : poses, frame.timestamp_ns);
+      const auto pose =
+          viewPose(model.poses != nullptr ? *model.poses : poses, frame, options.colour_time);
       if (!pose) break;
       T_W_C.push_back(*pose);
     }
@@ -161,6 +186,7 @@ ViewEvaluation evaluateViews(const std::vector<ViewModel>& models, core::FrameSo
     score.index = frame.index;
     score.timestamp_ns = frame.timestamp_ns;
     score.held_out = held_out;
+    score.at_colour_time = options.colour_time && frame.colour_timestamp_ns.has_value();
     score.pixels = static_cast<std::size_t>(cv::countNonZero(mask));
     if (score.pixels < options.min_pixels) continue;
     for (const ViewImage& render : renders) {
@@ -208,7 +234,8 @@ nlohmann::json viewFigures(const ViewEvaluation& evaluation) {
   nlohmann::json figures = {{"view_pixels", evaluation.pixels(false)},
                             {"view_pixels_holdout", evaluation.pixels(true)},
                             {"view_frames", evaluation.viewCount(false)},
-                            {"view_frames_holdout", evaluation.viewCount(true)}};
+                            {"view_frames_holdout", evaluation.viewCount(true)},
+                            {"view_pose_time", evaluation.poseTime()}};
   for (const NamedFigure& f : kFigures) {
     const std::string key = fmt::format("view_{}", f.name);
     for (const bool held_out : {false, true}) {

@@ -150,6 +150,43 @@ TEST(ViewEvaluation, AFaithfulMapScoresHighAndOneShiftedByACentimetreScoresLower
   EXPECT_LT(detail(1), detail(0) - 0.3);
 }
 
+// A camera sliding along x at 0.5 m/s whose colour image is taken 12 ms after its depth image
+// (as a Kinect v1's unsynchronised cameras do): the colour was captured 6 mm further on.
+TEST(ViewEvaluation, ViewsAreRenderedAtTheColourImagesTimeWhereTheSourceGivesIt) {
+  constexpr std::int64_t kFrameNs = 33'000'000, kColourLagNs = 12'000'000;
+  const auto poseAtTime = [](std::int64_t t_ns) {
+    core::Isometry T_W_C = core::Isometry::Identity();
+    T_W_C.translation() = Eigen::Vector3d(0.5 * static_cast<double>(t_ns) * 1e-9 - 0.1, 0.0, 0.6);
+    return T_W_C;
+  };
+  std::vector<core::Frame> frames;
+  core::Trajectory poses;  // at the depth images' times, as trajectory.txt holds them
+  for (int i = 0; i < 6; ++i) {
+    const std::int64_t t = i * kFrameNs;
+    core::Frame frame = captured(poseAtTime(t), static_cast<std::uint64_t>(i));
+    frame.rgb = captured(poseAtTime(t + kColourLagNs), static_cast<std::uint64_t>(i)).rgb;
+    frame.colour_timestamp_ns = t + kColourLagNs;
+    frames.push_back(std::move(frame));
+    poses[t] = poseAtTime(t);
+  }
+  const RenderMesh faithful = wallMap(0.0);
+  ViewEvaluationOptions options;
+  VectorSource at_colour(frames);
+  const ViewEvaluation colour = evaluateViews({{"faithful", &faithful}}, at_colour, poses, options);
+  options.colour_time = false;
+  VectorSource at_depth(frames);
+  const ViewEvaluation depth = evaluateViews({{"faithful", &faithful}}, at_depth, poses, options);
+  // The last frame's colour time lies past the trajectory's end: it is not scored.
+  ASSERT_EQ(colour.views.size(), 5u);
+  ASSERT_EQ(depth.views.size(), 6u);
+  EXPECT_EQ(colour.poseTime(), "colour");
+  EXPECT_EQ(depth.poseTime(), "depth");
+  EXPECT_GT(*colour.meanPsnr(0, false), 32.0);  // interpolated poses are exact here
+  EXPECT_LT(*depth.meanPsnr(0, false), *colour.meanPsnr(0, false) - 5.0);
+  EXPECT_GT(*colour.mean(0, false, &ImageSimilarity::detail),
+            *depth.mean(0, false, &ImageSimilarity::detail) + 0.1);
+}
+
 TEST(ViewEvaluation, HeldOutFramesAreScoredApartAndPixelsInFrontOfTheMapAreNotCompared) {
   WallViews views = wallViews();
   // Something stands 50 cm in front of the wall in the middle of the second view: the map is

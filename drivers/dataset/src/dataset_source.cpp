@@ -160,6 +160,7 @@ core::ReadResult DatasetSource::read() {
   cv::cvtColor(bgr, frame.rgb, cv::COLOR_BGR2RGB);
   frame.index = index;
   frame.timestamp_ns = entry.timestamp_ns;
+  frame.colour_timestamp_ns = entry.colour_timestamp_ns;
   frame.intrinsics = intrinsics_;
   frame.T_W_C_gt = entry.T_W_C;
   result.status = core::ReadStatus::kFrame;

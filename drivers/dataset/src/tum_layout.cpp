@@ -175,6 +175,7 @@ DatasetListing listTum(const std::filesystem::path& dir) {
     entry.rgb = dir / rgb.file;
     entry.depth = dir / depth.file;
     entry.timestamp_ns = depth.t_ns;
+    entry.colour_timestamp_ns = rgb.t_ns;
     if (trajectory) entry.T_W_C = trajectory->at(depth.t_ns);
     listing.entries.push_back(std::move(entry));
   }

@@ -18,7 +18,10 @@ struct ColourCamera {
 
 struct Frame {
   std::uint64_t index = 0;           // position in the source, from 0
-  std::int64_t timestamp_ns = 0;     // capture time, on the source's clock
+  std::int64_t timestamp_ns = 0;     // capture time (of the depth image), on the source's clock
+  // When the colour image was taken, on the same clock, where the source says: a Kinect v1
+  // does not synchronise its two cameras, so colour and depth are some milliseconds apart.
+  std::optional<std::int64_t> colour_timestamp_ns;
   // Live sources: when the frame reached this host (steady clock, ns since its epoch), for the
   // capture-to-fusion latency. 0 for recordings.
   std::int64_t arrival_ns = 0;

@@ -22,6 +22,11 @@ Trajectory readTumTrajectory(const std::filesystem::path& path);
 // One TUM-format line (with its newline) for the pose at `timestamp_ns`.
 std::string tumLine(std::int64_t timestamp_ns, const core::Isometry& T_W_C);
 
+// The pose at `t_ns`, interpolated between the poses around it (core::interpolate), or
+// nothing when t_ns lies outside the trajectory or between poses more than max_gap_ns apart.
+std::optional<core::Isometry> poseAt(const Trajectory& trajectory, std::int64_t t_ns,
+                                     std::int64_t max_gap_ns);
+
 // Writes TUM format (the inverse of readTumTrajectory). Throws core::Error naming the file.
 void writeTumTrajectory(const Trajectory& trajectory, const std::filesystem::path& path);
 

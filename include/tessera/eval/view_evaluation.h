@@ -46,6 +46,11 @@ struct ViewEvaluationOptions {
   // map.glb (tessera eval --map).
   std::filesystem::path map_file = "patches.obj";
   int save_views = 4;
+  // Render each view at the pose of the time its colour image was taken, interpolated from the
+  // poses around it, where the source gives colour time stamps: the colour was captured there,
+  // not at the depth image's time (tessera eval --pose-time). Else, and for sources without
+  // colour stamps, at the depth image's time.
+  bool colour_time = true;
 };
 
 struct ViewScore {
@@ -53,6 +58,7 @@ struct ViewScore {
   std::int64_t timestamp_ns = 0;
   bool held_out = false;
   std::size_t pixels = 0;                   // compared, the same for every model
+  bool at_colour_time = false;  // rendered at the colour image's time (else the depth's)
   std::vector<ImageSimilarity> similarity;  // per model
 };
 
@@ -68,6 +74,8 @@ struct ViewEvaluation {
   }
   std::size_t pixels(bool held_out) const;
   std::size_t viewCount(bool held_out) const;
+  // "colour" or "depth": the time every scored view was rendered at; "mixed" when both.
+  std::string poseTime() const;
 };
 
 // Renders every model at each chosen frame's pose in `poses` (by timestamp, within 1 ms) and
@@ -82,7 +90,8 @@ ViewEvaluation evaluateViews(const std::vector<ViewModel>& models, core::FrameSo
 // figure F of psnr, ssim and detail, view_F_mean, view_F_baseline_mean, view_F_holdout_mean
 // and view_F_baseline_holdout_mean; view_detail_correlation_mean and
 // view_detail_energy_ratio_mean with their baseline_ variants; view_pixels,
-// view_pixels_holdout, view_frames, view_frames_holdout (null where there are no views).
+// view_pixels_holdout, view_frames, view_frames_holdout (null where there are no views);
+// view_pose_time.
 nlohmann::json viewFigures(const ViewEvaluation& evaluation);
 
 }  // namespace tessera::eval

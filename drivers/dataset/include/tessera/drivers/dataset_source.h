@@ -30,7 +30,8 @@ DatasetLayout detectDatasetLayout(const std::filesystem::path& dir);
 struct DatasetEntry {
   std::filesystem::path rgb;
   std::filesystem::path depth;
-  std::int64_t timestamp_ns = 0;
+  std::int64_t timestamp_ns = 0;                    // the depth image's
+  std::optional<std::int64_t> colour_timestamp_ns;  // the colour image's, where the layout says
   std::optional<core::Isometry> T_W_C;
 };
 
