@@ -13,12 +13,12 @@
 namespace tessera::eval {
 namespace {
 
-constexpr int kWidth = 160, kHeight = 120;
+constexpr int kImageWidth = 160, kImageHeight = 120;
 
-cv::Mat texture() { return test::randomShapes(kWidth, kHeight, 7); }
+cv::Mat shapesImage() { return test::randomShapes(kImageWidth, kImageHeight, 7); }
 
 cv::Mat centreMask() {
-  cv::Mat mask = cv::Mat::zeros(kHeight, kWidth, CV_8UC1);
+  cv::Mat mask = cv::Mat::zeros(kImageHeight, kImageWidth, CV_8UC1);
   mask(cv::Rect(20, 15, 120, 90)).setTo(255);
   return mask;
 }
@@ -35,7 +35,7 @@ cv::Mat withNoise(const cv::Mat& image, double sigma, unsigned seed) {
 }
 
 TEST(ImageSimilarity, TheSameImageScoresOneOnEveryFigure) {
-  const cv::Mat image = texture();
+  const cv::Mat image = shapesImage();
   const auto s = compareImages(image, image, centreMask());
   ASSERT_TRUE(s);
   EXPECT_DOUBLE_EQ(s->psnr_db, 99.0);
@@ -46,7 +46,7 @@ TEST(ImageSimilarity, TheSameImageScoresOneOnEveryFigure) {
 }
 
 TEST(ImageSimilarity, BlurWeakensTheDetailAndAShiftMisplacesIt) {
-  const cv::Mat image = texture(), mask = centreMask();
+  const cv::Mat image = shapesImage(), mask = centreMask();
   cv::Mat blurred;
   cv::GaussianBlur(image, blurred, cv::Size(), 1.5);
   const auto blur = *compareImages(blurred, image, mask);
@@ -66,7 +66,7 @@ TEST(ImageSimilarity, BlurWeakensTheDetailAndAShiftMisplacesIt) {
 }
 
 TEST(ImageSimilarity, AddedNoiseAddsDetailEnergyAndLowersTheScore) {
-  const cv::Mat image = texture(), mask = centreMask();
+  const cv::Mat image = shapesImage(), mask = centreMask();
   const auto noisy = *compareImages(withNoise(image, 20.0, 11), image, mask);
   EXPECT_GT(noisy.detail_energy_ratio, 1.05);
   EXPECT_LT(noisy.detail, 0.95);
@@ -74,7 +74,7 @@ TEST(ImageSimilarity, AddedNoiseAddsDetailEnergyAndLowersTheScore) {
 }
 
 TEST(ImageSimilarity, PixelsOutsideTheMaskNeverCount) {
-  const cv::Mat image = texture(), mask = centreMask();
+  const cv::Mat image = shapesImage(), mask = centreMask();
   cv::Mat changed = image.clone();
   cv::Mat outside;
   cv::bitwise_not(mask, outside);
@@ -84,7 +84,7 @@ TEST(ImageSimilarity, PixelsOutsideTheMaskNeverCount) {
   EXPECT_DOUBLE_EQ(a.psnr_db, b.psnr_db);
   EXPECT_NEAR(a.ssim, b.ssim, 1e-6);
   EXPECT_NEAR(a.detail, b.detail, 1e-6);
-  EXPECT_FALSE(compareImages(image, image, cv::Mat::zeros(kHeight, kWidth, CV_8UC1)));
+  EXPECT_FALSE(compareImages(image, image, cv::Mat::zeros(kImageHeight, kImageWidth, CV_8UC1)));
 }
 
 }  // namespace
