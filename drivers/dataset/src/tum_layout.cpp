@@ -10,6 +10,7 @@
 
 #include "internal/layouts.h"
 #include "tessera/core/error.h"
+#include "tessera/core/trajectory.h"
 
 namespace tessera::drivers::internal {
 
@@ -99,20 +100,11 @@ class Trajectory {
   // Interpolated pose at t, or nothing when t is outside the trajectory or falls in a gap
   // longer than 0.1 s (the mocap lost the camera there).
   std::optional<core::Isometry> at(std::int64_t t_ns) const {
-    constexpr std::int64_t kMaxGapNs = 100'000'000;
-    auto after = poses_.lower_bound(t_ns);
-    if (after == poses_.end()) return std::nullopt;
-    if (after->first == t_ns) return after->second;
-    if (after == poses_.begin()) return std::nullopt;
-    auto before = std::prev(after);
-    const std::int64_t gap = after->first - before->first;
-    if (gap > kMaxGapNs) return std::nullopt;
-    const double alpha = static_cast<double>(t_ns - before->first) / static_cast<double>(gap);
-    return core::interpolate(before->second, after->second, alpha);
+    return core::poseAt(poses_, t_ns, 100'000'000);
   }
 
  private:
-  std::map<std::int64_t, core::Isometry> poses_;
+  core::Trajectory poses_;
 };
 
 // Which TUM Kinect (1, 2 or 3) a folder name names: "freiburg1", "fr1", "fr_2", ... as a word
