@@ -29,14 +29,18 @@ std::uint8_t fraction255(float value) {
 
 }  // namespace
 
-ColourSamples::ColourSamples(double cell_m)
-    : cell_m_(static_cast<float>(cell_m)), inverse_cell_(static_cast<float>(1.0 / cell_m)) {}
+ColourSamples::ColourSamples(double cell_m, int views_per_tile)
+    : cell_m_(static_cast<float>(cell_m)),
+      inverse_cell_(static_cast<float>(1.0 / cell_m)),
+      views_per_tile_(std::max(views_per_tile, 0)) {}
 
 ColourSamples& ColourSamples::operator=(const ColourSamples& other) {
   cell_m_ = other.cell_m_;
   inverse_cell_ = other.inverse_cell_;
+  views_per_tile_ = other.views_per_tile_;
   tiles_ = other.tiles_;
   size_ = other.size_;
+  crowded_ = other.crowded_;
   last_tile_ = nullptr;  // it pointed into the other object's tiles
   return *this;
 }
@@ -44,10 +48,13 @@ ColourSamples& ColourSamples::operator=(const ColourSamples& other) {
 ColourSamples& ColourSamples::operator=(ColourSamples&& other) noexcept {
   cell_m_ = other.cell_m_;
   inverse_cell_ = other.inverse_cell_;
+  views_per_tile_ = other.views_per_tile_;
   tiles_ = std::move(other.tiles_);
   size_ = other.size_;
+  crowded_ = std::move(other.crowded_);
   last_tile_ = nullptr;
   other.tiles_.clear();
+  other.crowded_.clear();
   other.size_ = 0;
   other.last_tile_ = nullptr;
   return *this;
@@ -57,32 +64,65 @@ std::int64_t ColourSamples::keyOf(int tile_u, int tile_v) {
   return (static_cast<std::int64_t>(tile_u) << 32) ^ static_cast<std::uint32_t>(tile_v);
 }
 
-std::vector<ColourSamples::Cell>& ColourSamples::tileAt(int tile_u, int tile_v) {
+ColourSamples::Tile& ColourSamples::tileAt(int tile_u, int tile_v) {
   const std::int64_t key = keyOf(tile_u, tile_v);
   if (last_tile_ != nullptr && key == last_key_) return *last_tile_;
-  auto [it, inserted] = tiles_.try_emplace(key);
-  if (inserted) it->second.resize(static_cast<std::size_t>(kTileCells * kTileCells));
+  Tile& tile = tiles_[key];
   last_key_ = key;
-  last_tile_ = &it->second;
-  return it->second;
+  last_tile_ = &tile;
+  return tile;
+}
+
+ColourSamples::Layer& ColourSamples::layerOf(Tile& tile, std::int64_t key, std::int32_t view) {
+  if (views_per_tile_ == 0) view = -1;  // one blended layer
+  // The view being added is nearly always the newest layer.
+  for (auto it = tile.rbegin(); it != tile.rend(); ++it) {
+    if (it->view == view) return *it;
+  }
+  Layer& layer = tile.emplace_back();
+  layer.view = view;
+  layer.cells.resize(static_cast<std::size_t>(kTileCells * kTileCells));
+  if (views_per_tile_ > 0 && tile.size() == static_cast<std::size_t>(views_per_tile_) + 1) {
+    crowded_.push_back(key);
+  }
+  return layer;
+}
+
+void ColourSamples::settle() {
+  for (const std::int64_t key : crowded_) {
+    Tile& tile = tiles_.at(key);
+    while (tile.size() > static_cast<std::size_t>(views_per_tile_)) {
+      const auto lightest =
+          std::min_element(tile.begin(), tile.end(),
+                           [](const Layer& a, const Layer& b) { return a.weight < b.weight; });
+      size_ -= lightest->filled;
+      tile.erase(lightest);
+    }
+  }
+  crowded_.clear();
 }
 
 void ColourSamples::add(const ColourSample& sample) {
   // Weights stay within float range whatever the score (a merge passes summed weights).
-  add(sample.u, sample.v, sample.rgb, std::exp(std::clamp(sample.score, -60.0F, 60.0F)));
+  add(sample.u, sample.v, sample.rgb, std::exp(std::clamp(sample.score, -60.0F, 60.0F)),
+      sample.view);
 }
 
-void ColourSamples::add(float u, float v, const std::array<std::uint8_t, 3>& rgb, float weight) {
+void ColourSamples::add(float u, float v, const std::array<std::uint8_t, 3>& rgb, float weight,
+                        std::int32_t view) {
   const float cell_u = u * inverse_cell_, cell_v = v * inverse_cell_;
   const int cu = static_cast<int>(std::floor(cell_u));
   const int cv = static_cast<int>(std::floor(cell_v));
   static_assert(kTileCells == 1 << kTileShift);
-  Cell& cell = tileAt(
-      cu >> kTileShift,
-      cv >> kTileShift)[static_cast<std::size_t>((cv & kCellMask) * kTileCells + (cu & kCellMask))];
+  Tile& tile = tileAt(cu >> kTileShift, cv >> kTileShift);
+  Layer& layer = layerOf(tile, last_key_, view);
+  layer.weight += weight;
+  Cell& cell =
+      layer.cells[static_cast<std::size_t>((cv & kCellMask) * kTileCells + (cu & kCellMask))];
   const float at_u = cell_u - static_cast<float>(cu), at_v = cell_v - static_cast<float>(cv);
   if (cell.weight <= 0.0F) {
     ++size_;
+    ++layer.filled;
     cell.weight = weight;
     for (int c = 0; c < 3; ++c) cell.rgb[c] = fixed88(rgb[c]);
     cell.at = {fraction255(at_u), fraction255(at_v)};
@@ -105,14 +145,23 @@ std::optional<Eigen::Vector3f> ColourSamples::colourAt(float u, float v) const {
   const int cv = static_cast<int>(std::floor(v * inverse_cell_));
   const auto it = tiles_.find(keyOf(cu >> kTileShift, cv >> kTileShift));
   if (it == tiles_.end()) return std::nullopt;
-  const Cell& cell =
-      it->second[static_cast<std::size_t>((cv & kCellMask) * kTileCells + (cu & kCellMask))];
-  if (cell.weight <= 0.0F) return std::nullopt;
-  return Eigen::Vector3f(cell.rgb[0], cell.rgb[1], cell.rgb[2]) / 256.0F;
+  const auto index = static_cast<std::size_t>((cv & kCellMask) * kTileCells + (cu & kCellMask));
+  const Cell* heaviest = nullptr;
+  float heaviest_weight = 0.0F;
+  for (const Layer& layer : it->second) {
+    if (layer.cells[index].weight > 0.0F && layer.weight > heaviest_weight) {
+      heaviest = &layer.cells[index];
+      heaviest_weight = layer.weight;
+    }
+  }
+  if (heaviest == nullptr) return std::nullopt;
+  return Eigen::Vector3f(heaviest->rgb[0], heaviest->rgb[1], heaviest->rgb[2]) / 256.0F;
 }
 
 std::size_t ColourSamples::bytes() const {
-  return tiles_.size() * static_cast<std::size_t>(kTileCells * kTileCells) * sizeof(Cell);
+  std::size_t layers = 0;
+  for (const auto& entry : tiles_) layers += entry.second.size();
+  return layers * static_cast<std::size_t>(kTileCells * kTileCells) * sizeof(Cell);
 }
 
 std::vector<ColourSample> ColourSamples::all() const {
@@ -121,19 +170,22 @@ std::vector<ColourSample> ColourSamples::all() const {
   for (const auto& [key, tile] : tiles_) {
     const auto tile_u = static_cast<int>(key >> 32);
     const auto tile_v = static_cast<int>(static_cast<std::int32_t>(key & 0xffffffff));
-    for (int r = 0; r < kTileCells; ++r) {
-      for (int c = 0; c < kTileCells; ++c) {
-        const Cell& cell = tile[static_cast<std::size_t>(r * kTileCells + c)];
-        if (cell.weight <= 0.0F) continue;
-        ColourSample sample;
-        sample.u = (static_cast<float>(tile_u * kTileCells + c) + cell.at[0] / 255.0F) * cell_m_;
-        sample.v = (static_cast<float>(tile_v * kTileCells + r) + cell.at[1] / 255.0F) * cell_m_;
-        for (int ch = 0; ch < 3; ++ch) {
-          sample.rgb[static_cast<std::size_t>(ch)] =
-              static_cast<std::uint8_t>(std::clamp(std::lround(cell.rgb[ch] / 256.0F), 0L, 255L));
+    for (const Layer& layer : tile) {
+      for (int r = 0; r < kTileCells; ++r) {
+        for (int c = 0; c < kTileCells; ++c) {
+          const Cell& cell = layer.cells[static_cast<std::size_t>(r * kTileCells + c)];
+          if (cell.weight <= 0.0F) continue;
+          ColourSample sample;
+          sample.u = (static_cast<float>(tile_u * kTileCells + c) + cell.at[0] / 255.0F) * cell_m_;
+          sample.v = (static_cast<float>(tile_v * kTileCells + r) + cell.at[1] / 255.0F) * cell_m_;
+          for (int ch = 0; ch < 3; ++ch) {
+            sample.rgb[static_cast<std::size_t>(ch)] =
+                static_cast<std::uint8_t>(std::clamp(std::lround(cell.rgb[ch] / 256.0F), 0L, 255L));
+          }
+          sample.score = std::log(cell.weight);
+          sample.view = layer.view;
+          samples.push_back(sample);
         }
-        sample.score = std::log(cell.weight);
-        samples.push_back(sample);
       }
     }
   }
@@ -142,7 +194,7 @@ std::vector<ColourSample> ColourSamples::all() const {
 
 namespace {
 
-constexpr char kSamplesMagic[8] = {'t', 's', 's', 'm', 'p', 'l', 's', '1'};
+constexpr char kSamplesMagic[8] = {'t', 's', 's', 'm', 'p', 'l', 's', '2'};
 
 }  // namespace
 
@@ -153,16 +205,26 @@ void ColourSamples::save(const std::filesystem::path& path) const {
   for (const auto& entry : tiles_) keys.push_back(entry.first);
   std::sort(keys.begin(), keys.end());
   const std::uint64_t count = keys.size(), size = size_;
+  const auto views = static_cast<std::int32_t>(views_per_tile_);
   out.write(kSamplesMagic, sizeof kSamplesMagic);
   out.write(reinterpret_cast<const char*>(&cell_m_), sizeof cell_m_);
   out.write(reinterpret_cast<const char*>(&inverse_cell_), sizeof inverse_cell_);
+  out.write(reinterpret_cast<const char*>(&views), sizeof views);
   out.write(reinterpret_cast<const char*>(&size), sizeof size);
   out.write(reinterpret_cast<const char*>(&count), sizeof count);
   for (const std::int64_t key : keys) {
-    const std::vector<Cell>& tile = tiles_.at(key);
+    const Tile& tile = tiles_.at(key);
+    const std::uint64_t layers = tile.size();
     out.write(reinterpret_cast<const char*>(&key), sizeof key);
-    out.write(reinterpret_cast<const char*>(tile.data()),
-              static_cast<std::streamsize>(tile.size() * sizeof(Cell)));
+    out.write(reinterpret_cast<const char*>(&layers), sizeof layers);
+    for (const Layer& layer : tile) {
+      const std::uint64_t filled = layer.filled;
+      out.write(reinterpret_cast<const char*>(&layer.view), sizeof layer.view);
+      out.write(reinterpret_cast<const char*>(&layer.weight), sizeof layer.weight);
+      out.write(reinterpret_cast<const char*>(&filled), sizeof filled);
+      out.write(reinterpret_cast<const char*>(layer.cells.data()),
+                static_cast<std::streamsize>(layer.cells.size() * sizeof(Cell)));
+    }
   }
   out.close();
   if (!out) {
@@ -175,25 +237,41 @@ ColourSamples ColourSamples::load(const std::filesystem::path& path) {
   std::ifstream in(path, std::ios::binary);
   char magic[sizeof kSamplesMagic] = {};
   float cell_m = 0.0F, inverse_cell = 0.0F;
+  std::int32_t views = 0;
   std::uint64_t size = 0, count = 0;
   in.read(magic, sizeof magic);
   in.read(reinterpret_cast<char*>(&cell_m), sizeof cell_m);
   in.read(reinterpret_cast<char*>(&inverse_cell), sizeof inverse_cell);
+  in.read(reinterpret_cast<char*>(&views), sizeof views);
   in.read(reinterpret_cast<char*>(&size), sizeof size);
   in.read(reinterpret_cast<char*>(&count), sizeof count);
   if (!in || !std::equal(magic, magic + sizeof magic, kSamplesMagic) || !(cell_m > 0.0F)) {
     throw core::Error(fmt::format("{}: not a colour sample file, or cut short", path.string()));
   }
-  ColourSamples samples(cell_m);
+  ColourSamples samples(cell_m, views);
   samples.inverse_cell_ = inverse_cell;  // as saved, bit for bit
+  const auto cut_short = [&] {
+    return core::Error(fmt::format("{}: colour samples cut short", path.string()));
+  };
   for (std::uint64_t i = 0; i < count; ++i) {
     std::int64_t key = 0;
-    std::vector<Cell> tile(static_cast<std::size_t>(kTileCells * kTileCells));
+    std::uint64_t layers = 0;
     in.read(reinterpret_cast<char*>(&key), sizeof key);
-    in.read(reinterpret_cast<char*>(tile.data()),
-            static_cast<std::streamsize>(tile.size() * sizeof(Cell)));
-    if (!in) throw core::Error(fmt::format("{}: colour samples cut short", path.string()));
-    samples.tiles_.emplace(key, std::move(tile));
+    in.read(reinterpret_cast<char*>(&layers), sizeof layers);
+    if (!in || layers > static_cast<std::uint64_t>(std::max(views, 1)) + 1) throw cut_short();
+    Tile& tile = samples.tiles_[key];
+    for (std::uint64_t l = 0; l < layers; ++l) {
+      Layer& layer = tile.emplace_back();
+      std::uint64_t filled = 0;
+      layer.cells.resize(static_cast<std::size_t>(kTileCells * kTileCells));
+      in.read(reinterpret_cast<char*>(&layer.view), sizeof layer.view);
+      in.read(reinterpret_cast<char*>(&layer.weight), sizeof layer.weight);
+      in.read(reinterpret_cast<char*>(&filled), sizeof filled);
+      in.read(reinterpret_cast<char*>(layer.cells.data()),
+              static_cast<std::streamsize>(layer.cells.size() * sizeof(Cell)));
+      if (!in) throw cut_short();
+      layer.filled = static_cast<std::size_t>(filled);
+    }
   }
   samples.size_ = size;
   return samples;

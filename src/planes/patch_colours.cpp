@@ -159,6 +159,7 @@ std::optional<Eigen::Vector3f> PatchMap::addColours(const core::Frame& frame,
 
   // Pass two: the samples, weighted by their view and the frame's sharpness.
   const auto frame_weight = static_cast<float>(std::max(sharpness, 1e-6));
+  const auto view = static_cast<std::int32_t>(frame.index);
   for (int y = 0; y < frame.rgb.rows; ++y) {
     const auto* label = detection.labels.ptr<std::uint8_t>(y / scale);
     const auto* sees = sees_plane.ptr<std::uint8_t>(y);
@@ -173,7 +174,8 @@ std::optional<Eigen::Vector3f> PatchMap::addColours(const core::Frame& frame,
         colour[static_cast<std::size_t>(c)] =
             cv::saturate_cast<std::uint8_t>(gain[c] * static_cast<float>(rgb[x][c]));
       }
-      tile->patch->samples.add(pixel[x].u, pixel[x].v, colour, pixel[x].weight * frame_weight);
+      tile->patch->samples.add(pixel[x].u, pixel[x].v, colour, pixel[x].weight * frame_weight,
+                               view);
       ++tile->pixels;
       tile->distance_sum += pixel[x].distance;
     }
@@ -184,6 +186,7 @@ std::optional<Eigen::Vector3f> PatchMap::addColours(const core::Frame& frame,
     for (TileTarget& tile : target.tiles) {
       if (tile.pixels == 0) continue;
       Patch& patch = *tile.patch;
+      patch.samples.settle();
       patch.footprint_sum_m += tile.distance_sum / k.fx;
       patch.footprint_pixels += tile.pixels;
       patch.log_gain_sum += static_cast<double>(tile.pixels) * log_gain;

@@ -75,7 +75,7 @@ std::size_t PatchMap::releaseIdleSamples(long frame_index) {
       std::filesystem::remove(path, ec);
       break;
     }
-    patch.samples = ColourSamples(config_.sample_cell_m);
+    patch.samples = ColourSamples(config_.sample_cell_m, config_.sample_views);
     patch.spilled_samples = path;
     ++released;
   }

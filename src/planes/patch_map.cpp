@@ -88,7 +88,7 @@ Patch& PatchMap::tileAt(int plane_id, const Cell& key) {
   tile.plane = plane_id;
   tile.tile = key;
   tile.geometry = plane.geometry;
-  tile.samples = ColourSamples(config_.sample_cell_m);
+  tile.samples = ColourSamples(config_.sample_cell_m, config_.sample_views);
   plane.tiles[key] = tile.id;
   return patches_.emplace(tile.id, std::move(tile)).first->second;
 }
@@ -186,6 +186,7 @@ std::set<int> PatchMap::mergePlane(int into_id, int from_id, std::vector<int>& i
         took.insert(it->second->id);
       }
     }
+    for (const auto& entry : tiles) entry.second->samples.settle();
     // Cells placed in other tiles than the one that took most.
     for (const Cell& cell : cells) {
       if (const auto it = tiles.find(grid.keyOf(cell)); it != tiles.end()) {

@@ -42,6 +42,7 @@ void readConfig(const core::ConfigSection& section, PatchMapConfig& config) {
   section.read("release_samples_after_frames", config.release_samples_after_frames);
   section.read("tile_m", config.tile_m);
   section.read("sample_cell_m", config.sample_cell_m);
+  section.read("sample_views", config.sample_views);
   section.read("colour_every_n_frames", config.colour_every_n_frames);
   section.read("colour_depth_tolerance_m", config.colour_depth_tolerance_m);
   section.read("colour_depth_tolerance_per_m2", config.colour_depth_tolerance_per_m2);
@@ -66,10 +67,11 @@ void readConfig(const core::ConfigSection& section, PatchMapConfig& config) {
   }
   if (config.min_area_m2 < 0.0 || config.sample_cell_m <= 0.0 || config.colour_every_n_frames < 1 ||
       config.colour_depth_tolerance_m <= 0.0 || config.colour_depth_tolerance_per_m2 < 0.0 ||
-      config.colour_edge_margin_px < 0) {
+      config.colour_edge_margin_px < 0 || config.sample_views < 0 || config.sample_views > 16) {
     throw core::ConfigError(
         "patches: min_area_m2, colour_depth_tolerance_per_m2 and colour_edge_margin_px must be "
-        "at least 0, sample_cell_m and colour_depth_tolerance_m positive, colour_every_n_frames "
+        "at least 0, sample_views 0 to 16, sample_cell_m and colour_depth_tolerance_m positive, "
+        "colour_every_n_frames "
         "at least 1");
   }
 }

@@ -129,6 +129,23 @@ void readConfig(const core::ConfigSection& section, BitmapConfig& config) {
   section.read("sigma_texels", config.sigma_texels);
   section.read("best_view", config.best_view);
   section.read("max_inpaint_texels", config.max_inpaint_texels);
+  section.read("view_selection", config.views.enabled);
+  section.read("region_texels", config.views.region_texels);
+  section.read("views_per_region", config.views.views_per_region);
+  section.read("seam_smoothness", config.views.smoothness);
+  section.read("seam_texels", config.views.seam_texels);
+  section.read("level_seams", config.views.level_seams);
+  section.read("align_views", config.alignment.enabled);
+  section.read("max_view_shift_texels", config.alignment.max_shift_texels);
+  if (config.views.region_texels < 4 || config.views.views_per_region < 1 ||
+      config.views.smoothness < 0.0 || config.views.seam_texels < 1 ||
+      config.views.seam_texels > config.views.region_texels / 2 ||
+      config.alignment.max_shift_texels <= 0.0) {
+    throw core::ConfigError(
+        "textures: region_texels must be at least 4, views_per_region and seam_texels at least "
+        "1, seam_texels at most half of region_texels, seam_smoothness at least 0, "
+        "max_view_shift_texels positive");
+  }
   constexpr double kFinest = 0.0005;  // half a millimetre: finer than any depth camera sees
   if ((config.texel_m != 0.0 && config.texel_m < kFinest) || config.min_texel_m < kFinest ||
       config.max_texel_m < config.min_texel_m) {
@@ -157,8 +174,27 @@ double texelSizeFor(const planes::PatchSnapshot& patch, const BitmapConfig& conf
 PatchBitmap buildBitmap(const planes::PatchSnapshot& patch, const BitmapConfig& config) {
   const auto start = std::chrono::steady_clock::now();
   PatchBitmap bitmap = emptyBitmap(patch, config);
-  const std::vector<ColourSample>& samples = patch.samples;
-  if (!samples.empty()) {
+  std::vector<ColourSample> samples = patch.samples;
+  const std::vector<ViewShift> shifts = alignViews(samples, bitmap.grid, config.alignment);
+  for (const ViewShift& shift : shifts) {
+    const double mm = 1000.0 * bitmap.grid.texel_m * std::hypot(shift.dx, shift.dy);
+    bitmap.view_shift_mean_mm += mm / static_cast<double>(shifts.size());
+    bitmap.view_shift_max_mm = std::max(bitmap.view_shift_max_mm, mm);
+  }
+  bitmap.views_moved = static_cast<int>(shifts.size());
+  const bool views_apart = std::any_of(samples.begin(), samples.end(),
+                                       [](const ColourSample& s) { return s.view >= 0; });
+  if (config.views.enabled && views_apart) {
+    const ViewComposite composite = composeByViews(samples, bitmap.grid, config.views,
+                                                   config.radius_texels, config.sigma_texels);
+    bitmap.image = composite.image;
+    bitmap.state.setTo(static_cast<int>(TexelState::kObserved), composite.observed);
+    bitmap.observed = static_cast<std::size_t>(cv::countNonZero(composite.observed));
+    bitmap.views_used = composite.views_used;
+    bitmap.seams = composite.seams;
+    bitmap.seam_step = composite.seam_step;
+    bitmap.seam_step_levelled = composite.seam_step_levelled;
+  } else if (!samples.empty()) {
     Eigen::MatrixXd positions(2, static_cast<Eigen::Index>(samples.size()));
     for (std::size_t i = 0; i < samples.size(); ++i) {
       positions.col(static_cast<Eigen::Index>(i)) << samples[i].u, samples[i].v;

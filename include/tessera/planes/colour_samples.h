@@ -1,10 +1,11 @@
 #pragma once
-// Colour samples of one patch, taken from the raw frames, with bounded memory per square metre:
-// the plane is cut into small cells and each cell blends every sample that falls into it (a
-// running weighted mean of colour and position), so a texel averages many views instead of
-// keeping the one or two heaviest. On real cameras neighbouring cells kept from different
-// frames differ in exposure and white balance; blended cells do not (docs/MEASUREMENTS.md,
-// "Textures on real cameras").
+// Colour samples of one patch, taken from the raw frames, with bounded memory per square metre.
+// The plane is cut into small cells, grouped in tiles of 32 x 32 cells. A tile keeps the
+// cells of its best few views apart, one layer per view (frame): within a layer a cell blends
+// the view's pixels that fall into it (a running weighted mean of colour and position). The
+// bitmap builder then chooses views per region, so that detail from views registered a few
+// millimetres apart is not averaged away (docs/MEASUREMENTS.md, "View selection"). With
+// views_per_tile 0 every view blends into one layer, the earlier rule.
 #include <array>
 #include <cstddef>
 #include <cstdint>
@@ -27,26 +28,35 @@ struct ColourSample {
   // blended cell, of the sum of its samples' weights). A log, so that weights of very
   // different size compare as exp(score_a - score_b).
   float score = kEmpty;
+  std::int32_t view = -1;  // the frame the sample came from; -1 where views are blended
 };
 
 class ColourSamples {
  public:
-  explicit ColourSamples(double cell_m);
+  // views_per_tile: how many views each tile keeps (the heaviest by summed weight); 0 blends
+  // all views into one.
+  explicit ColourSamples(double cell_m, int views_per_tile = 0);
   ColourSamples(const ColourSamples& other) { *this = other; }
   ColourSamples& operator=(const ColourSamples& other);
   ColourSamples(ColourSamples&& other) noexcept { *this = std::move(other); }
   ColourSamples& operator=(ColourSamples&& other) noexcept;
 
-  // Blends the sample into its cell with weight exp(sample.score).
+  // Blends the sample into its cell of its view's layer with weight exp(sample.score).
   void add(const ColourSample& sample);
   // The same with the weight itself (positive), as the per-pixel path has it.
-  void add(float u, float v, const std::array<std::uint8_t, 3>& rgb, float weight);
-  // The blended colour (RGB, 0-255) of the cell holding (u, v), if any sample reached it.
+  void add(float u, float v, const std::array<std::uint8_t, 3>& rgb, float weight,
+           std::int32_t view = -1);
+  // Drops, in each tile that got more than views_per_tile views since the last call, the
+  // layers of least summed weight. Call after adding a view (or a merge's samples): a view's
+  // weight in a tile is known only once all its pixels are in.
+  void settle();
+  // The colour (RGB, 0-255) of the cell holding (u, v) in the heaviest layer that has it.
   std::optional<Eigen::Vector3f> colourAt(float u, float v) const;
 
-  std::size_t size() const { return size_; }  // cells holding colour
+  std::size_t size() const { return size_; }  // cells holding colour, over all layers
   std::size_t bytes() const;
-  // One sample per cell holding colour: its blended colour at the weighted mean position.
+  // One sample per cell and layer holding colour: its blended colour at the weighted mean
+  // position, with the layer's view.
   std::vector<ColourSample> all() const;
 
   // The cells as a file, exactly (a finalized patch's samples leave memory so); throws
@@ -62,17 +72,28 @@ class ColourSamples {
     std::array<std::uint8_t, 2> at{};    // weighted mean position in the cell, 1/255 of a side
   };
   static constexpr int kTileCells = 32;  // tiles of 32 x 32 cells are allocated as touched
+  // One view's cells in a tile.
+  struct Layer {
+    std::int32_t view = -1;
+    float weight = 0.0F;      // summed weight of the view's pixels in the tile
+    std::size_t filled = 0;   // cells holding colour
+    std::vector<Cell> cells;  // kTileCells x kTileCells
+  };
+  using Tile = std::vector<Layer>;
   static std::int64_t keyOf(int tile_u, int tile_v);
-  std::vector<Cell>& tileAt(int tile_u, int tile_v);
+  Tile& tileAt(int tile_u, int tile_v);
+  Layer& layerOf(Tile& tile, std::int64_t key, std::int32_t view);
 
   float cell_m_;
   float inverse_cell_;  // 1 / the cell's side, metres
-  std::unordered_map<std::int64_t, std::vector<Cell>> tiles_;
+  int views_per_tile_ = 0;
+  std::unordered_map<std::int64_t, Tile> tiles_;
   std::size_t size_ = 0;
+  std::vector<std::int64_t> crowded_;  // tiles holding more than views_per_tile_ layers
   // Neighbouring pixels mostly land in the same tile: remember the last one looked up
   // (unordered_map elements keep their address when the map grows).
   std::int64_t last_key_ = 0;
-  std::vector<Cell>* last_tile_ = nullptr;
+  Tile* last_tile_ = nullptr;
 };
 
 }  // namespace tessera::planes

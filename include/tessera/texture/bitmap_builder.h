@@ -11,6 +11,7 @@
 #include "tessera/core/config.h"
 #include "tessera/planes/patch_map.h"
 #include "tessera/texture/texel_grid.h"
+#include "tessera/texture/view_selection.h"
 
 namespace tessera::texture {
 
@@ -30,6 +31,11 @@ struct BitmapConfig {
   double sigma_texels = 0.5;
   // Instead of averaging, take the colour of the one sample with the best view weight.
   bool best_view = false;
+  // Texels from views chosen per region (view_selection.h), where the samples keep their views
+  // apart (patches: sample_views > 0); otherwise the mean or best view above.
+  ViewSelectionConfig views;
+  // Each view's samples shifted in the plane to agree with the others first (any rule above).
+  ViewAlignmentConfig alignment;
   // Holes inside the outline of at most this many texels, ringed by coloured texels, are
   // inpainted (0: none).
   int max_inpaint_texels = 16;
@@ -53,6 +59,13 @@ struct PatchBitmap {
   cv::Mat state;   // CV_8UC1 TexelState
   std::size_t observed = 0, inpainted = 0;
   double build_ms = 0.0;
+  // View selection: distinct views used, seams between regions of different views, and the
+  // mean colour step at the seams as sampled and after levelling (grey levels).
+  int views_used = 0, seams = 0;
+  double seam_step = 0.0, seam_step_levelled = 0.0;
+  // View alignment: views moved, and how far (millimetres in the plane).
+  int views_moved = 0;
+  double view_shift_mean_mm = 0.0, view_shift_max_mm = 0.0;
   double area_m2() const { return static_cast<double>(observed) * grid.texel_m * grid.texel_m; }
 };
 
