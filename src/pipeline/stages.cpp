@@ -230,10 +230,37 @@ bool PlaneStage::wantsColours(std::uint64_t index, const core::Isometry& T_W_C) 
   return farFrom(*last_colour_pose_, T_W_C);
 }
 
-std::optional<Eigen::Vector3f> PlaneStage::sampleColours(const core::Frame& frame,
-                                                         const planes::PlaneDetection& detection,
-                                                         const core::Isometry& T_W_C,
-                                                         std::vector<int> ids) {
+std::optional<core::Isometry> PlaneStage::colourPose(const core::Frame& frame,
+                                                     const core::Isometry& T_W_C,
+                                                     const core::Isometry& T_W_C_map) {
+  std::optional<core::Isometry> pose;
+  if (map_.config().colour_at_colour_time && !frame.colour_timestamp_ns && !said_no_colour_time_) {
+    spdlog::info(
+        "frame {}: the source gives no colour time stamps; colour is placed at the depth "
+        "image's pose",
+        frame.index);
+    said_no_colour_time_ = true;
+  }
+  if (map_.config().colour_at_colour_time && frame.colour_timestamp_ns && previous_pose_) {
+    const auto& [previous_ns, T_W_previous] = *previous_pose_;
+    const auto span = static_cast<double>(frame.timestamp_ns - previous_ns);
+    const auto lead = static_cast<double>(*frame.colour_timestamp_ns - frame.timestamp_ns);
+    // Beyond these the motion between frames says little about the motion at the colour's time.
+    constexpr double kMaxSpanNs = 0.2e9, kMaxLeadNs = 0.1e9;
+    if (span > 0.0 && span <= kMaxSpanNs && lead != 0.0 && std::abs(lead) <= kMaxLeadNs) {
+      // T(t) = T_previous M^a, a = (t - t_previous) / span, with M the motion between the two
+      // frames in the previous camera's frame; at the colour's time T = T_W_C M^(lead / span).
+      const core::Isometry motion = T_W_previous.inverse() * T_W_C;
+      pose = T_W_C_map * core::interpolate(core::Isometry::Identity(), motion, lead / span);
+    }
+  }
+  previous_pose_ = {frame.timestamp_ns, T_W_C};
+  return pose;
+}
+
+std::optional<Eigen::Vector3f> PlaneStage::sampleColours(
+    const core::Frame& frame, const planes::PlaneDetection& detection, const core::Isometry& T_W_C,
+    std::vector<int> ids, const std::optional<core::Isometry>& T_W_C_colour) {
   if (wantsColours(frame.index, T_W_C)) {
     last_colour_pose_ = T_W_C;
   } else {
@@ -245,7 +272,7 @@ std::optional<Eigen::Vector3f> PlaneStage::sampleColours(const core::Frame& fram
       if (patch == nullptr || patch->samples.size() >= kFewSamples) id = -1;
     }
   }
-  return map_.addColours(frame, detection, T_W_C, ids, sharpness_.measure(frame.rgb));
+  return map_.addColours(frame, detection, T_W_C, ids, sharpness_.measure(frame.rgb), T_W_C_colour);
 }
 
 void PlaneStage::count(const std::vector<planes::PatchEvent>& events) {
@@ -300,8 +327,11 @@ FusedFrame PlaneStage::process(FusedFrame fused) {
           observation.keyframe_ns = keyframe_ns;
           observation.loop_motion = loop;
         }
-        fused.colour_gain = sampleColours(fused.frame, detection, loop * *fused.T_W_C_planes,
-                                          map_.add(observations));
+        const core::Isometry T_W_C_map = loop * *fused.T_W_C_planes;
+        const std::optional<core::Isometry> T_W_C_colour =
+            colourPose(fused.frame, *fused.T_W_C, T_W_C_map);
+        fused.colour_gain =
+            sampleColours(fused.frame, detection, T_W_C_map, map_.add(observations), T_W_C_colour);
       }
     } catch (const core::Error& e) {
       spdlog::warn("plane detection skipped {}", e.what());

@@ -2,6 +2,7 @@
 // (docs/MEASUREMENTS.md, "Textures: bitmaps of the finalized patches").
 #include <algorithm>
 #include <cmath>
+#include <optional>
 
 #include <opencv2/imgproc.hpp>
 
@@ -11,6 +12,14 @@
 namespace tessera::planes {
 
 namespace {
+
+// A plane in the colour camera's frame at the colour image's time: n_C . X_C = d_C, and the
+// camera-frame origin and axes of the plane's (u, v) frame.
+struct ColourPlane {
+  Eigen::Vector3f n_C;
+  float d_C = 0.0F;
+  Eigen::Vector3f origin_C, u_C, v_C;
+};
 
 // One tile of a region's plane, and what this frame gave it.
 struct TileTarget {
@@ -29,6 +38,7 @@ struct ColourTarget {
   double cell_m = 0.0;
   Eigen::Vector3f n_C, origin_C, u_C, v_C;
   float d_C = 0.0F;
+  std::optional<ColourPlane> colour_plane;  // where colour was taken at another time
 
   // The tile where the plane point (u, v) lies; none where the plane has no tile yet, or the
   // tile's samples are out of memory.
@@ -67,16 +77,17 @@ bool smooth(const cv::Mat& rgb, int x, int y) {
 
 }  // namespace
 
-std::optional<Eigen::Vector3f> PatchMap::addColours(const core::Frame& frame,
-                                                    const PlaneDetection& detection,
-                                                    const core::Isometry& T_W_C,
-                                                    const std::vector<int>& ids, double sharpness) {
+std::optional<Eigen::Vector3f> PatchMap::addColours(
+    const core::Frame& frame, const PlaneDetection& detection, const core::Isometry& T_W_C,
+    const std::vector<int>& ids, double sharpness,
+    const std::optional<core::Isometry>& T_W_C_colour) {
   const core::Intrinsics& k = frame.intrinsics;
   if (frame.colour_camera || frame.rgb.type() != CV_8UC3 || frame.rgb.cols != k.width ||
       frame.rgb.rows != k.height || frame.depth_mm.size() != frame.rgb.size()) {
     return std::nullopt;  // colour not registered pixel for pixel to depth
   }
   const core::Isometry T_C_W = T_W_C.inverse();
+  const core::Isometry T_Cc_W = T_W_C_colour.value_or(T_W_C).inverse();
   std::vector<ColourTarget> targets(ids.size());
   bool any = false;
   for (std::size_t r = 0; r < ids.size(); ++r) {
@@ -96,6 +107,14 @@ std::optional<Eigen::Vector3f> PatchMap::addColours(const core::Frame& frame,
     target.origin_C = (T_C_W * geometry.origin).cast<float>();
     target.u_C = (T_C_W.linear() * geometry.u_axis).cast<float>();
     target.v_C = (T_C_W.linear() * geometry.v_axis).cast<float>();
+    if (T_W_C_colour) {
+      target.colour_plane = ColourPlane{
+          (T_Cc_W.linear() * geometry.normal).cast<float>(),
+          static_cast<float>(geometry.offset - geometry.normal.dot(T_W_C_colour->translation())),
+          (T_Cc_W * geometry.origin).cast<float>(),
+          (T_Cc_W.linear() * geometry.u_axis).cast<float>(),
+          (T_Cc_W.linear() * geometry.v_axis).cast<float>()};
+    }
     any = true;
   }
   if (!any) return std::nullopt;
@@ -123,11 +142,18 @@ std::optional<Eigen::Vector3f> PatchMap::addColours(const core::Frame& frame,
       if (z <= 0.0F) continue;
       const float measured = static_cast<float>(depth[x]) * 1e-3F;
       if (std::abs(measured - z) > tolerance_m + tolerance_per_m2 * z * z) continue;
-      const Eigen::Vector3f offset = z * ray - target.origin_C;
+      Eigen::Vector3f offset = z * ray - target.origin_C;
       const float ray_norm = ray.norm();
       const float distance = z * ray_norm;
-      out[x] = {offset.dot(target.u_C), offset.dot(target.v_C),
-                std::abs(along) / ray_norm / (distance * distance), distance};
+      Eigen::Vector2f uv(offset.dot(target.u_C), offset.dot(target.v_C));
+      if (const auto& at = target.colour_plane) {
+        // The same pixel of the colour image looked along its ray at the colour's own time.
+        const float along_colour = at->n_C.dot(ray);
+        if (std::abs(along_colour) < 1e-6F) continue;
+        offset = (at->d_C / along_colour) * ray - at->origin_C;
+        uv = {offset.dot(at->u_C), offset.dot(at->v_C)};
+      }
+      out[x] = {uv.x(), uv.y(), std::abs(along) / ray_norm / (distance * distance), distance};
       sees[x] = 255;
     }
   }

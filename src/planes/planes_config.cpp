@@ -44,6 +44,7 @@ void readConfig(const core::ConfigSection& section, PatchMapConfig& config) {
   section.read("sample_cell_m", config.sample_cell_m);
   section.read("sample_views", config.sample_views);
   section.read("colour_every_n_frames", config.colour_every_n_frames);
+  section.read("colour_at_colour_time", config.colour_at_colour_time);
   section.read("colour_depth_tolerance_m", config.colour_depth_tolerance_m);
   section.read("colour_depth_tolerance_per_m2", config.colour_depth_tolerance_per_m2);
   section.read("colour_edge_margin_px", config.colour_edge_margin_px);

@@ -129,5 +129,41 @@ TEST(PatchColours, PixelsOfAnOccluderNeverReachThePatchBehindIt) {
   EXPECT_EQ(cv::countNonZero(red), 0);
 }
 
+// The colour image taken 2 cm to the right of where the depth image was (an unsynchronised
+// Kinect v1 while the camera moves): placed with the colour's own pose, each sample has the
+// board's colour at its position; placed with the depth's pose, a 2 cm strip at every edge of
+// the board's squares has the neighbouring square's colour.
+TEST(PatchColours, ColourTakenAtAnotherPoseIsPlacedWithThatPose) {
+  const core::Isometry T_W_depth = core::Isometry::Identity();
+  core::Isometry T_W_colour = core::Isometry::Identity();
+  T_W_colour.translation() = Eigen::Vector3d(0.02, 0.0, 0.0);
+  const Eigen::Vector3d n(0, 0, -1);
+  core::Frame frame = test::renderPlane(test::kinectIntrinsics(), T_W_depth, n, -2.0);
+  frame.rgb = test::renderPlane(test::kinectIntrinsics(), T_W_colour, n, -2.0).rgb;
+  const PlaneDetector detector(PlaneDetectorConfig{});
+  const PlaneDetection detection = detector.detect(frame);
+  ASSERT_EQ(detection.planes.size(), 1u);
+  const auto misplacedShare = [&](const std::optional<core::Isometry>& colour_pose) {
+    PatchMap map(PatchMapConfig{});
+    const std::vector<int> ids = map.add(observationsOf(frame, detection, T_W_depth));
+    map.addColours(frame, detection, T_W_depth, ids, 1.0, colour_pose);
+    const Patch& patch = map.patches().front();
+    const Patch::Frame plane = patch.planeFrame();
+    std::size_t wrong = 0, total = 0;
+    for (const ColourSample& s : patch.samples.all()) {
+      const Eigen::Vector3d X = plane.origin + s.u * plane.u_axis + s.v * plane.v_axis;
+      const long squares = static_cast<long>(std::floor(X.x() * 10)) +
+                           static_cast<long>(std::floor(X.y() * 10)) +
+                           static_cast<long>(std::floor(X.z() * 10));
+      const std::uint8_t want = squares % 2 != 0 ? 40 : 220;
+      wrong += std::abs(static_cast<int>(s.rgb[0]) - want) > 60 ? 1 : 0;
+      ++total;
+    }
+    return static_cast<double>(wrong) / static_cast<double>(std::max<std::size_t>(total, 1));
+  };
+  EXPECT_LT(misplacedShare(T_W_colour), 0.03);
+  EXPECT_GT(misplacedShare(std::nullopt), 0.1);
+}
+
 }  // namespace
 }  // namespace tessera::planes

@@ -197,12 +197,21 @@ class PlaneStage {
   // for patches that have hardly any yet. Returns the frame's exposure gain (PatchMap).
   std::optional<Eigen::Vector3f> sampleColours(const core::Frame& frame,
                                                const planes::PlaneDetection& detection,
-                                               const core::Isometry& T_W_C, std::vector<int> ids);
+                                               const core::Isometry& T_W_C, std::vector<int> ids,
+                                               const std::optional<core::Isometry>& T_W_C_colour);
+  // The pose at the colour image's time stamp, where the source gives one and it differs from
+  // the depth image's: the camera's motion from the previous frame to this one (tracked, or as
+  // the ground truth has it) interpolated or carried on to that time, applied to T_W_C_map.
+  // Remembers this frame's tracked pose T_W_C for the next.
+  std::optional<core::Isometry> colourPose(const core::Frame& frame, const core::Isometry& T_W_C,
+                                           const core::Isometry& T_W_C_map);
 
   planes::PlaneDetector detector_;
   planes::PatchMap map_;
   planes::SharpnessGauge sharpness_;
   std::optional<core::Isometry> last_colour_pose_;
+  std::optional<std::pair<std::int64_t, core::Isometry>> previous_pose_;  // time, tracked pose
+  bool said_no_colour_time_ = false;
   planes::PlaneAlignmentConfig alignment_;
   // World drift measured against the patches, carried frame to frame, in the tracker's world
   // (before loop closure's motion).

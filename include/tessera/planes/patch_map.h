@@ -66,6 +66,10 @@ struct PatchMapConfig {
   // at 30 frames/s neighbouring frames see nearly the same thing, and sampling is the
   // costliest part of the plane stage.
   int colour_every_n_frames = 2;
+  // Colour placed with the camera's pose at the colour image's own time stamp, where the source
+  // gives one (a Kinect v1 does not synchronise its two cameras: on TUM the colour is 9.5 ms
+  // from the depth on average), from the camera's motion between frames.
+  bool colour_at_colour_time = true;
   // A pixel colours its patch only where the measured depth agrees with the patch's plane
   // within colour_depth_tolerance_m + colour_depth_tolerance_per_m2 * z^2 (the sensor's noise
   // grows with z^2): what stands on or in front of the plane (clutter, an occluder) is not its
@@ -220,10 +224,13 @@ class PatchMap {
   // colours are first multiplied by the frame's gain. Needs rgb registered to depth. Returns
   // the gain applied (1 without compensation; the last frame's when this one overlaps too
   // little of what the patches hold to estimate its own), or nothing when no pixel gave colour.
-  std::optional<Eigen::Vector3f> addColours(const core::Frame& frame,
-                                            const PlaneDetection& detection,
-                                            const core::Isometry& T_W_C,
-                                            const std::vector<int>& ids, double sharpness = 1.0);
+  // T_W_C_colour: the camera's pose when the colour image was taken, where that differs from
+  // the depth image's time (T_W_C): a pixel's depth is tested at T_W_C, its colour placed on
+  // the plane along its ray at T_W_C_colour.
+  std::optional<Eigen::Vector3f> addColours(
+      const core::Frame& frame, const PlaneDetection& detection, const core::Isometry& T_W_C,
+      const std::vector<int>& ids, double sharpness = 1.0,
+      const std::optional<core::Isometry>& T_W_C_colour = std::nullopt);
 
   // Closes frame `frame_index` (patches seen in it are the ones add() touched since the last
   // call) and returns the finalizations and retirements it caused.
