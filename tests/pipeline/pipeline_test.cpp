@@ -353,12 +353,12 @@ TEST(Pipeline, TracksTheRealFastRotatingTumSequenceWithinOneCentimetre) {
   EXPECT_EQ(report["tracking_losses"], 0);
 }
 
-TEST(Pipeline, RealTumTexturesRenderAboutAsFaithfullyAsTheMeshOnTrainingAndHeldOutViews) {
+TEST(Pipeline, RealTumTexturesRenderMoreFaithfullyThanTheMeshOnTrainingAndHeldOutViews) {
   // tum_fr1_rpy_40 at its motion-capture poses, every 5th frame held out: the patches rendered
   // into the captured frames against the run's own vertex-coloured mesh on the same pixels
   // (docs/METRICS.md, view PSNR). Keeping each cell's two heaviest samples scored 1.1 dB
   // (training) and 1.8 dB (held out) below the mesh; blended, visibility-checked cells about
-  // 0.3 and 0.7 dB below.
+  // 0.3 and 0.7 dB below; with colour placed at its own time, 0.5 and 0.6 dB above.
   TESSERA_REQUIRE_SHARED("rgbd/tum_fr1_rpy_40");
   const auto folder = test::sharedData() / "rgbd/tum_fr1_rpy_40";
   drivers::DatasetSource source(folder);
@@ -370,29 +370,31 @@ TEST(Pipeline, RealTumTexturesRenderAboutAsFaithfullyAsTheMeshOnTrainingAndHeldO
   EXPECT_EQ(summary.integration.frames_held_out, 8u);
   EXPECT_EQ(summary.integration.frames_integrated + summary.integration.frames_between_integrations,
             32u);
-  // Rendered at the depth images' times, the poses the colour was placed with.
-  eval::ViewEvaluationOptions at_depth;
-  at_depth.colour_time = false;
+  // Rendered where the colour was taken (TUM gives its stamps), the time the colour was placed
+  // at: the patches above the mesh, in PSNR, SSIM and detail, on training and held-out views
+  // (measured 26.98 / 26.65 dB against the mesh's 26.45 / 26.02).
   drivers::DatasetSource frames(folder);
-  const nlohmann::json figures = eval::evaluateRunViews(options.out_dir, frames, at_depth);
-  EXPECT_EQ(figures["view_pose_time"], "depth");
+  const nlohmann::json figures = eval::evaluateRunViews(options.out_dir, frames, {});
+  EXPECT_EQ(figures["view_pose_time"], "colour");
   EXPECT_EQ(figures["view_frames_holdout"], 8);
   EXPECT_GT(figures["view_pixels"].get<std::size_t>(), 1'000'000u);
   const double train = figures["view_psnr_mean"].get<double>();
   const double held_out = figures["view_psnr_holdout_mean"].get<double>();
-  EXPECT_GT(train, 25.0);
-  EXPECT_GT(train, figures["view_psnr_baseline_mean"].get<double>() - 0.8);
-  EXPECT_GT(held_out, figures["view_psnr_baseline_holdout_mean"].get<double>() - 1.2);
+  EXPECT_GT(train, 26.0);
+  EXPECT_GT(train, figures["view_psnr_baseline_mean"].get<double>() + 0.2);
+  EXPECT_GT(held_out, figures["view_psnr_baseline_holdout_mean"].get<double>() + 0.2);
+  EXPECT_GT(figures["view_ssim_mean"].get<double>(),
+            figures["view_ssim_baseline_mean"].get<double>());
+  EXPECT_GT(figures["view_detail_mean"].get<double>(),
+            2.0 * figures["view_detail_baseline_mean"].get<double>());
 
-  // Rendered where the colour was taken (TUM gives its stamps): the bitmaps, built with colour
-  // at the depth pose, lose more than the mesh does (1.2 dB below it when measured; the mesh's
-  // 2 cm blur hides misplaced colour).
+  // Rendered at the depth images' times instead, the colour lands where it was not taken.
+  eval::ViewEvaluationOptions at_depth;
+  at_depth.colour_time = false;
   drivers::DatasetSource again(folder);
-  const nlohmann::json at_colour = eval::evaluateRunViews(options.out_dir, again, {});
-  EXPECT_EQ(at_colour["view_pose_time"], "colour");
-  const double colour_train = at_colour["view_psnr_mean"].get<double>();
-  EXPECT_LT(colour_train, train);
-  EXPECT_GT(colour_train, at_colour["view_psnr_baseline_mean"].get<double>() - 1.6);
+  const nlohmann::json at_depth_figures = eval::evaluateRunViews(options.out_dir, again, at_depth);
+  EXPECT_EQ(at_depth_figures["view_pose_time"], "depth");
+  EXPECT_LT(at_depth_figures["view_psnr_mean"].get<double>(), train - 0.5);
 }
 
 // The matcher's catalog keeps stored textures in memory up to its budget, least recently used
