@@ -236,6 +236,7 @@ core::ReadResult FreenectSource::nextFrame() {
   }
   core::Frame& frame = result.frame;
   frame.rgb = std::move(colour->image);
+  frame.colour_timestamp_ns = ticksToNs(colour->stamp);  // its own time: no synchronisation
   lock.unlock();
   frame.index = frames_out_++;
   frame.timestamp_ns = ticksToNs(depth.stamp);

@@ -273,7 +273,10 @@ core::ReadResult OniSource::read() {
   frame.index = frames_out_++;
   frame.timestamp_ns = depth->timestamp_us * 1000;
   frame.depth_mm = std::move(depth->image);
-  if (colour) frame.rgb = std::move(colour->image);
+  if (colour) {
+    frame.rgb = std::move(colour->image);
+    frame.colour_timestamp_ns = colour->timestamp_us * 1000;  // not synchronised with depth
+  }
   frame.colour_camera = colour_camera_;
   frame.intrinsics = intrinsics_;
   if (const auto pose = poses_by_timestamp_us_.find(depth->timestamp_us);

@@ -321,6 +321,7 @@ core::ReadResult OpenNi2Source::State::nextFrame() {
   }
   core::Frame& frame = result.frame;
   frame.rgb = std::move(colour->image);
+  const std::int64_t colour_stamp = colour->stamp;
   lock.unlock();
   frame.index = frames_out++;
   // A reconnected device may restart its clock: later sessions continue after the last
@@ -332,6 +333,8 @@ core::ReadResult OpenNi2Source::State::nextFrame() {
   session_start_pending = false;
   last_timestamp_us = depth.stamp + session_offset_us;
   frame.timestamp_ns = *last_timestamp_us * 1000;
+  // The two streams are not synchronised: the colour image has its own time (same clock).
+  frame.colour_timestamp_ns = (colour_stamp + session_offset_us) * 1000;
   frame.arrival_ns = depth.arrival_ns;
   frame.depth_mm = std::move(depth.image);
   frame.intrinsics = intrinsics;
