@@ -106,6 +106,13 @@ class Regions {
   }
 
   std::size_t count() const { return static_cast<std::size_t>(columns_) * rows_; }
+  // The region (dc, dr) regions away from region b, or -1 past the grid's edge.
+  long neighbour(std::size_t b, int dc, int dr) const {
+    const int c = static_cast<int>(b % static_cast<std::size_t>(columns_)) + dc;
+    const int r = static_cast<int>(b / static_cast<std::size_t>(columns_)) + dr;
+    if (c < 0 || r < 0 || c >= columns_ || r >= rows_) return -1;
+    return static_cast<long>(r) * columns_ + c;
+  }
   int columns() const { return columns_; }
   int rows() const { return rows_; }
   int side() const { return side_; }
@@ -378,14 +385,12 @@ ViewComposite composeByViews(const std::vector<ColourSample>& samples, const Tex
       }
     };
     add(view_of[b]);
-    const int rc = static_cast<int>(b % static_cast<std::size_t>(regions.columns()));
-    const int rr = static_cast<int>(b / static_cast<std::size_t>(regions.columns()));
     for (int dr = -1; dr <= 1; ++dr) {
       for (int dc = -1; dc <= 1; ++dc) {
-        if (rc + dc < 0 || rr + dr < 0 || rc + dc >= regions.columns() || rr + dr >= regions.rows())
-          continue;
-        const int n = view_of[static_cast<std::size_t>((rr + dr) * regions.columns() + rc + dc)];
-        if (n >= 0) add(n);
+        const long n = regions.neighbour(b, dc, dr);
+        if (n >= 0 && view_of[static_cast<std::size_t>(n)] >= 0) {
+          add(view_of[static_cast<std::size_t>(n)]);
+        }
       }
     }
     for (const std::int32_t view : candidates[b].views) add(view);
@@ -413,12 +418,10 @@ ViewComposite composeByViews(const std::vector<ColourSample>& samples, const Tex
     neededViews(b, views);
     regions.splat(b, views, radius_texels, sigma_texels);
     const ViewTexels* own = find(views, view_of[b]);
-    const int rc = static_cast<int>(b % static_cast<std::size_t>(regions.columns()));
-    const int rr = static_cast<int>(b / static_cast<std::size_t>(regions.columns()));
     for (const auto& [dc, dr] : {std::pair{1, 0}, {-1, 0}, {0, 1}, {0, -1}}) {
-      if (rc + dc < 0 || rr + dr < 0 || rc + dc >= regions.columns() || rr + dr >= regions.rows())
-        continue;
-      const auto n = static_cast<std::size_t>((rr + dr) * regions.columns() + rc + dc);
+      const long neighbour = regions.neighbour(b, dc, dr);
+      if (neighbour < 0) continue;
+      const auto n = static_cast<std::size_t>(neighbour);
       if (view_of[n] < 0 || view_of[n] == view_of[b]) continue;
       const ViewTexels* other = find(views, view_of[n]);
       Seam& seam = seams.try_emplace({std::min(b, n), std::max(b, n)}).first->second;
@@ -446,16 +449,15 @@ ViewComposite composeByViews(const std::vector<ColourSample>& samples, const Tex
   // The offset of `view` at a texel of region b: interpolated over the regions around b that
   // took that view (a tent of one region's side around each centre); b's own where none did.
   const auto offsetOf = [&](std::size_t b, std::int32_t view, double tx, double ty) {
-    const int rc = static_cast<int>(b % static_cast<std::size_t>(regions.columns()));
-    const int rr = static_cast<int>(b / static_cast<std::size_t>(regions.columns()));
+    const auto rc = static_cast<double>(b % static_cast<std::size_t>(regions.columns()));
+    const auto rr = static_cast<double>(b / static_cast<std::size_t>(regions.columns()));
     cv::Vec3d sum(0, 0, 0);
     double total = 0.0;
     for (int dr = -1; dr <= 1; ++dr) {
       for (int dc = -1; dc <= 1; ++dc) {
-        if (rc + dc < 0 || rr + dr < 0 || rc + dc >= regions.columns() || rr + dr >= regions.rows())
-          continue;
-        const auto m = static_cast<std::size_t>((rr + dr) * regions.columns() + rc + dc);
-        if (view_of[m] != view) continue;
+        const long neighbour = regions.neighbour(b, dc, dr);
+        if (neighbour < 0 || view_of[static_cast<std::size_t>(neighbour)] != view) continue;
+        const auto m = static_cast<std::size_t>(neighbour);
         const double cx = (rc + dc + 0.5) * side, cy = (rr + dr + 0.5) * side;
         const double w = std::max(0.02, 1.0 - std::abs(tx - cx) / side) *
                          std::max(0.02, 1.0 - std::abs(ty - cy) / side);
@@ -477,8 +479,6 @@ ViewComposite composeByViews(const std::vector<ColourSample>& samples, const Tex
     if (view_of[b] < 0) continue;
     neededViews(b, views);
     regions.splat(b, views, radius_texels, sigma_texels);
-    const int rc = static_cast<int>(b % static_cast<std::size_t>(regions.columns()));
-    const int rr = static_cast<int>(b / static_cast<std::size_t>(regions.columns()));
     for (int i = 0; i < texels; ++i) {
       const cv::Point t = regions.texel(b, i);
       if (!regions.inside(t)) continue;
@@ -486,11 +486,9 @@ ViewComposite composeByViews(const std::vector<ColourSample>& samples, const Tex
       blend.assign(1, {view_of[b], 1.0});
       for (int dr = -1; dr <= 1; ++dr) {
         for (int dc = -1; dc <= 1; ++dc) {
-          if ((dc == 0 && dr == 0) || rc + dc < 0 || rr + dr < 0 || rc + dc >= regions.columns() ||
-              rr + dr >= regions.rows()) {
-            continue;
-          }
-          const int n = view_of[static_cast<std::size_t>((rr + dr) * regions.columns() + rc + dc)];
+          const long neighbour = regions.neighbour(b, dc, dr);
+          if ((dc == 0 && dr == 0) || neighbour < 0) continue;
+          const int n = view_of[static_cast<std::size_t>(neighbour)];
           const double w = 1.0 - distanceTo(lx, ly, dc, dr) / seam_width;
           if (n < 0 || w <= 0.0) continue;
           auto it =
@@ -525,9 +523,9 @@ ViewComposite composeByViews(const std::vector<ColourSample>& samples, const Tex
         }
       }
       if (total <= 0.0) {
-        // Not seen by the views blended here: the region's next candidate that saw it; failing
-        // that, the nearest samples a little further off (between the rows of a grazing view),
-        // of the region's view first. A view occluded here has none of either nearby.
+        // Not seen by the views blended here: the region's heaviest candidate that saw it;
+        // failing that, the nearest samples a little further off (between the rows of a grazing
+        // view). A view occluded here has none of either nearby.
         for (const bool far : {false, true}) {
           for (const std::int32_t view : candidates[b].views) {
             const ViewTexels* v = find(views, view);
