@@ -1,11 +1,10 @@
 #pragma once
 // Colour samples of one patch, taken from the raw frames, with bounded memory per square metre.
-// The plane is cut into small cells, grouped in tiles of 32 x 32 cells. A tile keeps the
-// cells of its best few views apart, one layer per view (frame): within a layer a cell blends
-// the view's pixels that fall into it (a running weighted mean of colour and position). The
-// bitmap builder then chooses views per region, so that detail from views registered a few
-// millimetres apart is not averaged away (docs/MEASUREMENTS.md, "View selection"). With
-// views_per_tile 0 every view blends into one layer, the earlier rule.
+// The plane is cut into small cells, grouped in tiles of 32 x 32 cells; a cell blends the
+// pixels that fall into it (a running weighted mean of colour and position). With
+// views_per_tile 0 (the default) every view blends into one layer of cells. With N > 0 a tile
+// keeps the cells of its N heaviest views apart, one layer per view (frame), for the bitmap
+// builder to align and choose views per region (docs/MEASUREMENTS.md, "View selection").
 #include <array>
 #include <cstddef>
 #include <cstdint>

@@ -57,9 +57,9 @@ struct PatchMapConfig {
   // a patch with its own id, samples, texture and versions, sharing the plane. Surfaces up to
   // tile_m are never cut. 0 never cuts.
   double tile_m = 6.0;
-  // Colour samples: each sample_cell_m square of the plane blends the samples of one view that
-  // fall in it, and each 32 x 32 cells keep the sample_views views of most summed weight (0:
-  // every view blends into one, the earlier rule).
+  // Colour samples: each sample_cell_m square of the plane blends the samples that fall in it.
+  // With sample_views > 0 it blends those of one view only, and each 32 x 32 cells keep the
+  // sample_views views of most summed weight apart, for view selection.
   double sample_cell_m = 0.0035;
   int sample_views = 0;
   // Colours are taken from every N-th frame (and from frames far from the last one sampled):
