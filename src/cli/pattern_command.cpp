@@ -33,6 +33,8 @@ nlohmann::json analysisJson(const pattern::PatternAnalysis& analysis) {
     out["psnr_db"] = found->psnr_db;
     out["explained"] = found->explained;
     out["repeats"] = found->repeats;
+    // 0 under even light; else the bitmap is the tiling times a gain field this uneven.
+    out["shading_spread"] = found->shading.empty() ? 0.0 : found->shading_spread;
     nlohmann::json overlays = nlohmann::json::array();
     for (const cv::Rect& r : found->overlays) overlays.push_back({r.x, r.y, r.width, r.height});
     out["overlays"] = overlays;
@@ -89,6 +91,11 @@ int patternCommand(const PatternArguments& args) {
           "the variance, {} overlay(s)\n",
           found->tile_rgb.cols, found->tile_rgb.rows, found->repeats, found->psnr_db,
           100.0 * found->explained, found->overlays.size());
+      if (!found->shading.empty()) {
+        fmt::print("  under uneven light: tile x shading, the gain spanning {:.0f} % (PSNR and "
+                   "variance of the bitmap divided by it)\n",
+                   100.0 * found->shading_spread);
+      }
     } else {
       fmt::print("{}: none ({})\n", args.image, analysis.reason);
       const pattern::LatticeEstimate& e = analysis.estimate;

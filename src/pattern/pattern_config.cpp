@@ -29,6 +29,9 @@ void readConfig(const core::ConfigSection& section, PatternStageConfig& config) 
   section.read("min_overlay_error", p.min_overlay_error);
   section.read("min_overlay_px", p.min_overlay_px);
   section.read("max_tile_repetitions", p.max_tile_repetitions);
+  section.read("shading", p.shading);
+  section.read("shading_cells", p.shading_cells);
+  section.read("min_shading_spread", p.min_shading_spread);
   section.read("min_overlay_side_px", config.min_overlay_side_px);
   section.read("min_overlay_area_px", config.min_overlay_area_px);
   section.read("overlay_margin_px", config.overlay_margin_px);
@@ -37,6 +40,9 @@ void readConfig(const core::ConfigSection& section, PatternStageConfig& config) 
     throw core::ConfigError(
         "pattern: min_overlay_side_px and min_overlay_area_px must be >= 1, overlay_margin_px "
         ">= 0");
+  }
+  if (p.shading_cells < 0.5 || p.min_shading_spread < 0.0) {
+    throw core::ConfigError("pattern: shading_cells must be >= 0.5, min_shading_spread >= 0");
   }
   if (p.analysis_max_px < 16) throw core::ConfigError("pattern: analysis_max_px must be >= 16");
   if (p.max_tile_repetitions < 0 || (p.max_tile_repetitions > 0 && p.max_tile_repetitions < 3)) {

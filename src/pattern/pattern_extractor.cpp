@@ -12,8 +12,10 @@
 #include <opencv2/imgproc.hpp>
 
 #include "internal/lattice_refinement.h"
+#include "internal/shading.h"
 #include "internal/tiling.h"
 #include "tessera/core/error.h"
+#include "tessera/match/fidelity.h"
 
 namespace tessera::pattern {
 
@@ -70,20 +72,6 @@ Faithfulness judgeTiling(const cv::Mat& rgb, const TilingError& tiling,
   const double mse = sse / (3.0 * n);
   out.psnr_db = mse > 0.0 ? std::min(99.0, 10.0 * std::log10(255.0 * 255.0 / mse)) : 99.0;
   out.explained = sst > 0.0 ? 1.0 - sse / sst : 0.0;
-  return out;
-}
-
-// A Gaussian blur of standard deviation `sigma` approximated by three box filters of equal
-// width w, whose variance is 3 (w^2 - 1) / 12 (central limit; Wells 1986): each box costs the
-// same whatever its width, where a direct Gaussian of the wide sigma here would dominate.
-cv::Mat wideBlur(const cv::Mat& image, double sigma) {
-  const int half = std::max(
-      1, static_cast<int>(std::lround(0.5 * (std::sqrt(4.0 * sigma * sigma + 1.0) - 1.0))));
-  const cv::Size box(2 * half + 1, 2 * half + 1);
-  cv::Mat out;
-  cv::blur(image, out, box);
-  cv::blur(out, out, box);
-  cv::blur(out, out, box);
   return out;
 }
 
@@ -244,20 +232,67 @@ std::vector<core::Lattice2> candidateCells(const core::Lattice2& cell, bool stri
   return cells;
 }
 
-// The cell's tile built from `rgb` and judged against it.
+// The tiling of a cell's tile over the bitmap's extent, and where it gives a colour.
+match::Rendered tiledOver(const cv::Mat& rgb, const cv::Mat& tile_rgb, const cv::Mat& tile_mask,
+                          const core::Lattice2& cell) {
+  return match::renderPattern(tile_rgb, tile_mask, cell, {}, rgb.cols, rgb.rows);
+}
+
+// The bitmap's shading under the cell's tiling (pattern.shading, internal/shading.h), when the
+// light varies by at least config.min_shading_spread; empty under even light. The tile and
+// the field are estimated in turn: the tile from the bitmap divided by the field, the field
+// from the bitmap against the tile's tiling. The light does not depend on which multiple of
+// the cell is tried, so one fit serves every candidate.
+cv::Mat shadingOf(const cv::Mat& rgb, const cv::Mat& mask, const core::Lattice2& cell,
+                  const PatternConfig& config) {
+  if (!config.shading) return {};
+  const cv::Size size = tileSize(cell);
+  cv::Mat tile_rgb, tile_mask;
+  averageTile(rgb, mask, cell, size.width, size.height, tile_rgb, tile_mask,
+              config.max_tile_repetitions);
+  const double sigma =
+      std::max(4.0, config.shading_cells * std::max(cell.v1.norm(), cell.v2.norm()));
+  cv::Mat gain;
+  for (int round = 0; round < 3; ++round) {
+    const match::Rendered tiled = tiledOver(rgb, tile_rgb, tile_mask, cell);
+    const cv::Mat valid = mask.empty() ? tiled.covered : (tiled.covered & mask);
+    gain = estimateShading(rgb, tiled.rgb, valid, sigma);
+    // Fitted again without what the tiling does not explain (an occluder would pull it).
+    const cv::Mat explained = explainedByShading(rgb, tiled.rgb, gain, valid);
+    gain = estimateShading(rgb, tiled.rgb, explained, sigma);
+    if (round == 0 && shadingSpread(gain, explained) < config.min_shading_spread) return {};
+    averageTile(unshaded(rgb, gain), mask, cell, size.width, size.height, tile_rgb, tile_mask,
+                config.max_tile_repetitions);
+  }
+  return gain;
+}
+
+// The cell's tile built from `rgb` and judged against it; under uneven light (a `shading`,
+// resized to the bitmap if fitted on the scaled one), from and against the bitmap divided by
+// it.
 Pattern tileAndJudge(const cv::Mat& rgb, const cv::Mat& mask, const core::Lattice2& cell,
-                     Periodicity periodicity, const PatternConfig& config,
+                     Periodicity periodicity, const PatternConfig& config, const cv::Mat& shading,
                      double& unexplained_share) {
   Pattern pattern;
   pattern.periodicity = periodicity;
   pattern.lattice = cell;
   const double valid = mask.empty() ? static_cast<double>(rgb.total()) : cv::countNonZero(mask);
   pattern.repeats = valid / cell.cellArea();
+  cv::Mat even = rgb;
+  if (!shading.empty()) {
+    if (shading.size() == rgb.size()) {
+      pattern.shading = shading;
+    } else {
+      cv::resize(shading, pattern.shading, rgb.size(), 0, 0, cv::INTER_LINEAR);
+    }
+    pattern.shading_spread = shadingSpread(pattern.shading, mask);
+    even = unshaded(rgb, pattern.shading);
+  }
   const cv::Size size = tileSize(cell);
-  averageTile(rgb, mask, cell, size.width, size.height, pattern.tile_rgb, pattern.tile_mask,
+  averageTile(even, mask, cell, size.width, size.height, pattern.tile_rgb, pattern.tile_mask,
               config.max_tile_repetitions);
-  const TilingError tiling = tilingError(rgb, mask, pattern.tile_rgb, pattern.tile_mask, cell);
-  Faithfulness judged = judgeTiling(rgb, tiling, config);
+  const TilingError tiling = tilingError(even, mask, pattern.tile_rgb, pattern.tile_mask, cell);
+  Faithfulness judged = judgeTiling(even, tiling, config);
   pattern.psnr_db = judged.psnr_db;
   pattern.explained = judged.explained;
   pattern.unexplained = std::move(judged.unexplained);
@@ -286,7 +321,8 @@ std::string unfaithfulness(const Pattern& p, double unexplained_share,
 // (index 2 above it) are tried, and one whose tiling stays as faithful (within
 // config.finer_psnr_loss_db) replaces it, until none does.
 core::Lattice2 finestFaithful(const Scaled& scaled, core::Lattice2 cell, double psnr_db,
-                              Periodicity periodicity, const PatternConfig& config) {
+                              Periodicity periodicity, const PatternConfig& config,
+                              const cv::Mat& shading) {
   const bool stripes = periodicity == Periodicity::kOneDirection;
   const double shortest = config.lattice.min_period_px;
   for (int round = 0; round < 4; ++round) {
@@ -301,7 +337,7 @@ core::Lattice2 finestFaithful(const Scaled& scaled, core::Lattice2 cell, double 
       if (candidate.v1.norm() < shortest || (!stripes && candidate.v2.norm() < shortest)) continue;
       double share = 0.0;
       const Pattern trial =
-          tileAndJudge(scaled.rgb, scaled.mask, candidate, periodicity, config, share);
+          tileAndJudge(scaled.rgb, scaled.mask, candidate, periodicity, config, shading, share);
       if (unfaithfulness(trial, share, config).empty() && trial.psnr_db >= best_psnr) {
         best = candidate, best_psnr = trial.psnr_db;
       }
@@ -346,12 +382,14 @@ PatternAnalysis analysePattern(const cv::Mat& rgb, const cv::Mat& mask,
   // faithful, is built at full size.
   std::optional<core::Lattice2> chosen;
   double share = 0.0;
+  const cv::Mat shading = shadingOf(scaled.rgb, scaled.mask, cell, config);
   for (const core::Lattice2& candidate : candidateCells(cell, stripes)) {
-    const Pattern trial =
-        tileAndJudge(scaled.rgb, scaled.mask, candidate, estimate.periodicity, config, share);
+    const Pattern trial = tileAndJudge(scaled.rgb, scaled.mask, candidate, estimate.periodicity,
+                                       config, shading, share);
     analysis.reason = unfaithfulness(trial, share, config);
     if (analysis.reason.empty()) {
-      chosen = finestFaithful(scaled, candidate, trial.psnr_db, estimate.periodicity, config);
+      chosen =
+          finestFaithful(scaled, candidate, trial.psnr_db, estimate.periodicity, config, shading);
       break;
     }
   }
@@ -361,7 +399,7 @@ PatternAnalysis analysePattern(const cv::Mat& rgb, const cv::Mat& mask,
   if (!chosen) return finish();
   core::Lattice2 full{chosen->v1 / scaled.f, chosen->v2 / scaled.f};
   if (scaled.f < 1.0) full = refineLattice(rgb, mask, full, stripes ? 1 : 2);
-  Pattern pattern = tileAndJudge(rgb, mask, full, estimate.periodicity, config, share);
+  Pattern pattern = tileAndJudge(rgb, mask, full, estimate.periodicity, config, shading, share);
   analysis.reason = unfaithfulness(pattern, share, config);
   if (analysis.reason.empty()) analysis.pattern = std::move(pattern);
   return finish();

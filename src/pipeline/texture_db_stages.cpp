@@ -59,7 +59,16 @@ DescribedPatch DescribeStage::process(const PatchJob& job) const {
     pattern::PatternAnalysis analysis = pattern::analysePattern(
         described.description->rgb, described.description->mask, patterns_.extractor);
     described.pattern_ms = analysis.ms;
-    described.pattern = std::move(analysis.pattern);
+    if (analysis.pattern && !analysis.pattern->shading.empty()) {
+      // The store and the exports carry a tile, not its shading: such a pattern would show
+      // the light's fall-off flattened, so the patch is stored whole.
+      spdlog::info(
+          "patch {} version {}: periodic under light varying by {:.0f} %; stored whole (shaded "
+          "patterns are not stored yet)",
+          bitmap.id, bitmap.version, 100.0 * analysis.pattern->shading_spread);
+    } else {
+      described.pattern = std::move(analysis.pattern);
+    }
   } catch (const std::exception& e) {  // then matched and stored without layers
     spdlog::warn("patch {} version {}: no pattern: {}", bitmap.id, bitmap.version, e.what());
   }

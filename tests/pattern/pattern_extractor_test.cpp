@@ -137,6 +137,83 @@ TEST(PatternExtractor, TheTileReproducesTheBitmapAtItsPhase) {
   EXPECT_EQ(p.tile_rgb.total(), 18u * 14u);  // one cell, whichever vector comes first
 }
 
+// A floor lit from one side (the light falls off by half across it) with a spotlight on it
+// (+60 % at its centre, Gaussian): the shading is a smooth gain field over the tiling.
+cv::Mat floorLight(cv::Size size) {
+  cv::Mat gain(size, CV_32FC1);
+  const cv::Point2f spot(0.62F * static_cast<float>(size.width),
+                         0.4F * static_cast<float>(size.height));
+  const float spot_sigma = 0.18F * static_cast<float>(size.width);
+  for (int row = 0; row < size.height; ++row) {
+    for (int col = 0; col < size.width; ++col) {
+      const float falloff = 1.0F - 0.5F * static_cast<float>(col) / static_cast<float>(size.width);
+      const float dx = static_cast<float>(col) - spot.x, dy = static_cast<float>(row) - spot.y;
+      const float spotlight = 0.6F * std::exp(-(dx * dx + dy * dy) / (2 * spot_sigma * spot_sigma));
+      gain.at<float>(row, col) = 0.75F * (falloff + spotlight);
+    }
+  }
+  return gain;
+}
+
+cv::Mat lit(const cv::Mat& rgb, const cv::Mat& gain) {
+  cv::Mat out(rgb.size(), CV_8UC3);
+  for (int row = 0; row < rgb.rows; ++row) {
+    for (int col = 0; col < rgb.cols; ++col) {
+      for (int c = 0; c < 3; ++c) {
+        out.at<cv::Vec3b>(row, col)[c] = cv::saturate_cast<std::uint8_t>(
+            gain.at<float>(row, col) * static_cast<float>(rgb.at<cv::Vec3b>(row, col)[c]));
+      }
+    }
+  }
+  return out;
+}
+
+TEST(PatternExtractor, ATiledFloorUnderUnevenLightIsTileTimesShading) {
+  // Tiles of 22 x 26 texels, darkened by half across the floor and lit by a spotlight: the
+  // lattice is exact, the shading recovered within a few percent of the light (up to its mean,
+  // which the tile carries), and tile x shading renders the floor at 30 dB or more.
+  const cv::Mat tile = randomTile(22, 26, 21);
+  const core::Lattice2 truth{{22.0, 0.0}, {4.0, 26.0}};
+  const cv::Mat even = tiling(tile, truth, 320, 240);
+  const cv::Mat light = floorLight(even.size());
+  const cv::Mat floor = lit(even, light);
+  const PatternAnalysis analysis = analysePattern(floor, {});
+  ASSERT_TRUE(analysis.pattern) << analysis.reason;
+  const Pattern& p = *analysis.pattern;
+  EXPECT_TRUE(sameLattice(p.lattice, truth, 1.0))
+      << "found (" << p.lattice.v1.transpose() << "), (" << p.lattice.v2.transpose() << ")";
+  ASSERT_FALSE(p.shading.empty());
+  EXPECT_GT(p.shading_spread, 0.3);
+
+  // The light up to its mean: within 5 % on 95 % of the floor (measured: all of it, 1.3 % on
+  // average), away from the border where
+  // the window runs out.
+  const cv::Mat relative = light / cv::mean(light)[0];
+  const cv::Rect inner(24, 24, floor.cols - 48, floor.rows - 48);
+  cv::Mat error;
+  cv::absdiff(p.shading(inner), relative(inner), error);
+  error /= relative(inner);
+  EXPECT_GT(cv::countNonZero(error < 0.05), 0.95 * static_cast<double>(inner.area()));
+
+  // What the map would show: the tile's tiling times the shading.
+  const match::Rendered tiled =
+      match::renderPattern(p.tile_rgb, p.tile_mask, p.lattice, {}, floor.cols, floor.rows);
+  match::Rendered shown = tiled;
+  shown.rgb = lit(tiled.rgb, p.shading);
+  // Measured 37.2 dB; the tile without its shading reaches 23.2.
+  const double with_shading = match::measureFidelity(floor, {}, shown).psnr_db;
+  EXPECT_GE(with_shading, 30.0);
+  EXPECT_LT(match::measureFidelity(floor, {}, tiled).psnr_db, with_shading - 8.0);
+}
+
+TEST(PatternExtractor, EvenLightHasNoShading) {
+  const cv::Mat tile = randomTile(20, 20, 4);
+  const PatternAnalysis analysis =
+      analysePattern(tiling(tile, {{20.0, 0.0}, {0.0, 20.0}}, 200, 160), {});
+  ASSERT_TRUE(analysis.pattern) << analysis.reason;
+  EXPECT_TRUE(analysis.pattern->shading.empty());
+}
+
 TEST(PatternExtractor, StochasticTexturesAreNotPeriodic) {
   // Smooth random fields at several grain sizes: at most 5 % may be called periodic.
   int periodic = 0, total = 0;

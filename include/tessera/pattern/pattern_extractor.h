@@ -38,6 +38,13 @@ struct PatternConfig {
   // the bitmap (0: all): the median of 32 already has a tenth of the noise of one texel, and
   // a bitmap of small cells would otherwise cost a median over hundreds.
   int max_tile_repetitions = 32;
+  // Uneven light (a floor's fall-off, a spotlight): the bitmap is modelled as tile x shading,
+  // a smooth gain field estimated over a window of shading_cells cells, and the tiling is
+  // built and judged on the bitmap divided by it, when its spread (95th - 5th percentile)
+  // reaches min_shading_spread.
+  bool shading = true;
+  double shading_cells = 0.75;
+  double min_shading_spread = 0.05;
 };
 
 struct Pattern {
@@ -53,6 +60,10 @@ struct Pattern {
   double repeats = 0.0;            // valid bitmap area / cell area
   cv::Mat unexplained;             // CV_8UC1 over the bitmap: 255 in an overlay
   std::vector<cv::Rect> overlays;  // bounding boxes of the unexplained blobs
+  // CV_32FC1 over the bitmap, mean 1: the bitmap is the tiling times this gain; empty under
+  // even light. psnr_db and explained are then those of the bitmap divided by it.
+  cv::Mat shading;
+  double shading_spread = 0.0;  // its 95th - 5th percentile
 };
 
 struct PatternAnalysis {
