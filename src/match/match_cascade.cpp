@@ -39,6 +39,52 @@ cv::Mat rotated(const cv::Mat& image, int turns) {
   return out;
 }
 
+// The best placement of a stored texture that overlaps the new bitmap in part, at any quarter
+// turn: found on both scaled to at most kCoarsePx a side (masked NCC over every shift, by DFT),
+// then refined at full size around it. Placements sharing fewer than kMinOverlapShare of the
+// smaller mask's texels are not considered (the acceptance rule's coverage decides the rest).
+struct TurnedPeak {
+  CorrelationPeak peak;
+  int turns = 0;
+};
+
+TurnedPeak findPartialOverlap(const cv::Mat& query_grey, const cv::Mat& query_mask,
+                              const cv::Mat& stored_grey, const cv::Mat& stored_mask) {
+  constexpr double kCoarsePx = 192.0;
+  constexpr double kMinOverlapShare = 0.3;
+  const cv::Mat full_query_mask =
+      query_mask.empty() ? cv::Mat(query_grey.size(), CV_8UC1, cv::Scalar(255)) : query_mask;
+  const cv::Mat full_stored_mask =
+      stored_mask.empty() ? cv::Mat(stored_grey.size(), CV_8UC1, cv::Scalar(255)) : stored_mask;
+  const int longest =
+      std::max({query_grey.cols, query_grey.rows, stored_grey.cols, stored_grey.rows});
+  const double f = std::min(1.0, kCoarsePx / longest);
+  const auto small = [f](const cv::Mat& image, int interpolation) {
+    if (f >= 1.0) return image;
+    cv::Mat out;
+    cv::resize(image, out, cv::Size(), f, f, interpolation);
+    return out;
+  };
+  const double min_overlap = kMinOverlapShare * std::min(cv::countNonZero(full_query_mask),
+                                                         cv::countNonZero(full_stored_mask));
+  const cv::Mat q = small(query_grey, cv::INTER_AREA);
+  const cv::Mat qm = small(full_query_mask, cv::INTER_NEAREST);
+  TurnedPeak best;
+  for (int turns = 0; turns < 4; ++turns) {
+    const CorrelationPeak peak = findOverlap(
+        q, qm, small(rotated(stored_grey, turns), cv::INTER_AREA),
+        small(rotated(full_stored_mask, turns), cv::INTER_NEAREST), min_overlap * f * f);
+    if (peak.score > best.peak.score) best = {peak, turns};
+  }
+  if (best.peak.score <= -1.0 || f >= 1.0) return best;
+  const CorrelationPeak start{static_cast<int>(std::lround(best.peak.x / f)),
+                              static_cast<int>(std::lround(best.peak.y / f)), best.peak.score};
+  best.peak = refineOverlap(query_grey, full_query_mask, rotated(stored_grey, best.turns),
+                            rotated(full_stored_mask, best.turns), start,
+                            static_cast<int>(std::ceil(1.0 / f)) + 1, min_overlap);
+  return best;
+}
+
 // Zero-mean normalised correlation of two RGB images over `mask` (grey levels): whether the
 // render follows the patch's structure, not only its mean colour.
 double structureAgreement(const cv::Mat& a, const cv::Mat& b, const cv::Mat& mask) {
@@ -167,6 +213,15 @@ std::optional<core::Similarity2> MatchCascade::findPattern(const TextureDescript
     } else if (!stored.pattern && query_grey.cols <= tile.cols && query_grey.rows <= tile.rows) {
       const CorrelationPeak peak = findTile(tile, query_grey);
       if (peak.score > best.score) best = peak, best_turns = turns, stored_inside = false;
+    }
+  }
+  // Neither inside the other (the same floor seen from two places): the placement over the
+  // texels both cover.
+  if (!stored.pattern && best.score < config_.ncc_min_score) {
+    const TurnedPeak overlap =
+        findPartialOverlap(query_grey, query.mask, stored_grey, stored.description.mask);
+    if (overlap.peak.score > best.score) {
+      best = overlap.peak, best_turns = overlap.turns, stored_inside = true;
     }
   }
   verdict.method = "ncc";

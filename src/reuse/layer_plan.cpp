@@ -154,10 +154,13 @@ std::optional<LayerPlan> LayerPlanner::planPattern(const match::TextureDescripti
 std::optional<LayerPlan> LayerPlanner::planPartialReuse(
     const match::TextureDescription& bitmap,
     const std::vector<match::CandidateVerdict>& verdicts) const {
-  // The candidate the cascade placed over most of the bitmap and refused for its fidelity.
+  // The candidate the cascade placed over most of the bitmap and refused for its fidelity or
+  // its coverage: what it leaves uncovered (the same floor seen further on) is an overlay of
+  // the bitmap's own texels, so it needs to cover what the overlays may not.
+  const pattern::PatternConfig& limits = patterns_.extractor;
   const match::CandidateVerdict* placed = nullptr;
   for (const match::CandidateVerdict& verdict : verdicts) {
-    if (verdict.transform && verdict.coverage >= cascade_.config().min_coverage &&
+    if (verdict.transform && verdict.coverage >= 1.0 - limits.max_overlay_share &&
         (placed == nullptr || verdict.psnr_db > placed->psnr_db)) {
       placed = &verdict;
     }
@@ -172,7 +175,6 @@ std::optional<LayerPlan> LayerPlanner::planPartialReuse(
   cv::Mat error = pattern::colourError(bitmap.rgb, render.rgb);
   error.setTo(255.0f, ~render.covered & bitmap.mask);
   error.setTo(0.0f, ~bitmap.mask);
-  const pattern::PatternConfig& limits = patterns_.extractor;
   const pattern::Overlays regions = pattern::findOverlays(
       error, bitmap.mask, {limits.overlay_sigmas, limits.min_overlay_error, limits.min_overlay_px});
   if (regions.blobs.empty() || regions.unexplained_share > limits.max_overlay_share) {

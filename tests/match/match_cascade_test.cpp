@@ -85,6 +85,33 @@ TEST(MatchCascade, ATurnedAndShiftedRepetitionOfAPatternTileIsFoundByCrossCorrel
   EXPECT_NEAR(std::remainder(a.y() - b.y(), 32.0), 0.0, 0.5);
 }
 
+TEST(MatchCascade, ATextureOverlappingAStoredOneInPartIsPlacedOverTheirCommonTexels) {
+  // The same floor from two places: the new bitmap shows the stored texture's bottom-right
+  // corner and more, a quarter turn away, neither inside the other. With features unable to
+  // help (a plain, fine-grained surface), the masked cross-correlation places it exactly; the
+  // acceptance rule then refuses it for covering under half of the patch.
+  MatchConfig config;
+  config.features.min_inliers = 1'000'000;
+  const cv::Mat big = texture(600, 520, 23);
+  MemoryCatalog catalog(config.ccv);
+  catalog.add(stored(7, big(cv::Rect(0, 0, 400, 300)).clone(), false, config));
+  // New texel (c, r) shows stored texel (330 - r, 170 + c): 320 x 320 texels, of which the
+  // 130 columns c < 130 land inside the stored 400 x 300.
+  const core::Similarity2 truth{0.0, 1.0, 330.0, 170.0};
+  const Rendered query = renderThrough(big, cv::Mat(), truth, 320, 320, false);
+  ASSERT_EQ(cv::countNonZero(query.covered), 320 * 320);
+  const CandidateVerdict verdict = MatchCascade(config).tryCandidate(
+      describeTexture(query.rgb, query.covered, config), *catalog.load(7), 0.0);
+  EXPECT_EQ(verdict.method, "ncc");
+  ASSERT_TRUE(verdict.transform.has_value()) << verdict.reason;
+  for (const Eigen::Vector2d& p : {Eigen::Vector2d(0, 0), Eigen::Vector2d(319, 319)}) {
+    EXPECT_LT((verdict.transform->apply(p) - truth.apply(p)).norm(), 0.5) << p.transpose();
+  }
+  EXPECT_NEAR(verdict.coverage, 130.0 / 320.0, 0.02);
+  EXPECT_FALSE(verdict.accepted);
+  EXPECT_GT(verdict.psnr_db, 35.0);  // over the texels both cover
+}
+
 TEST(MatchCascade, AnUnrelatedTextureIsStoredOnItsOwn) {
   const MatchConfig config;
   MemoryCatalog catalog(config.ccv);

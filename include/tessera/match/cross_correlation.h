@@ -23,4 +23,20 @@ cv::Mat normalisedCrossCorrelation(const cv::Mat& image, const cv::Mat& tile);
 // The highest peak of that map. A flat window (no variance) scores 0.
 CorrelationPeak findTile(const cv::Mat& image, const cv::Mat& tile);
 
+// Two textures that overlap in part, neither inside the other (the same floor seen from two
+// places): the shift (x, y) at which `moving`'s origin sits in `fixed`'s frame, so that
+// fixed(p) ~ moving(p - (x, y)), that best correlates the two over the texels both cover:
+// masked normalised cross-correlation over every shift by six DFT products (Padfield, "Masked
+// object registration in the Fourier domain", 2012). Shifts whose common texels number fewer
+// than `min_overlap` are not considered. Both images CV_32FC1 from greyForCorrelation, masks
+// CV_8UC1 (0 = no texel). A score of -1 when no shift has that overlap.
+CorrelationPeak findOverlap(const cv::Mat& fixed, const cv::Mat& fixed_mask, const cv::Mat& moving,
+                            const cv::Mat& moving_mask, double min_overlap);
+
+// The same score computed directly at the shifts within `radius` of `start` (each costs the
+// overlap's texels): a shift found on scaled-down images, made exact at full size.
+CorrelationPeak refineOverlap(const cv::Mat& fixed, const cv::Mat& fixed_mask,
+                              const cv::Mat& moving, const cv::Mat& moving_mask,
+                              const CorrelationPeak& start, int radius, double min_overlap);
+
 }  // namespace tessera::match

@@ -1,7 +1,8 @@
 #pragma once
 // Layers for a bitmap that matched nothing whole. Its base is a periodic pattern (new, or a
 // stored one aligned through the two lattices) or a stored texture the cascade placed but
-// refused because some regions differ (a blackboard on one wall, posters on the other).
+// refused because some regions differ (a blackboard on one wall, posters on the other) or it
+// covers only part of the bitmap (the same floor seen further on: the rest is an overlay).
 // Regions the base does not explain become overlays, matched against the catalog like any
 // bitmap. A plan is kept only when all its layers together pass MatchConfig::accepts.
 #include <optional>
@@ -47,8 +48,9 @@ class LayerPlanner {
   // reuses, else the new tile) and its overlays.
   std::optional<LayerPlan> planPattern(const match::TextureDescription& bitmap,
                                        pattern::Pattern found) const;
-  // The candidate that covers most of the bitmap, best first among `verdicts` (placed but
-  // refused for fidelity), as the base, and what it does not explain as overlays.
+  // The best placed candidate among `verdicts` (refused for fidelity or coverage) that covers
+  // at least 1 - max_overlay_share of the bitmap, as the base, and what it does not explain or
+  // cover as overlays.
   std::optional<LayerPlan> planPartialReuse(
       const match::TextureDescription& bitmap,
       const std::vector<match::CandidateVerdict>& verdicts) const;
