@@ -55,6 +55,10 @@ bool LoopGraph::withinView(int match, int query) const {
 }
 
 bool LoopGraph::agree(const Pending& a, const Pending& b) const {
+  // Odometry links the two queries only within a segment (or segments already joined), and
+  // two joins confirm each other only when they join the same segments.
+  if (rootOf(a.query) != rootOf(b.query)) return false;
+  if (a.joins != b.joins || (a.joins && rootOf(a.match) != rootOf(b.match))) return false;
   // The motion between the two queries as the two loops imply it, against odometry's.
   const core::Isometry via_loops =
       impliedPose(a.match, a.query, a.revisit).inverse() * impliedPose(b.match, b.query, b.revisit);
@@ -63,6 +67,23 @@ bool LoopGraph::agree(const Pending& a, const Pending& b) const {
   const core::Isometry difference = via_odometry.inverse() * via_loops;
   return difference.translation().norm() <= config_.consistency_m &&
          core::rotationAngleDeg(difference) <= config_.consistency_deg;
+}
+
+int LoopGraph::rootOf(int keyframe) const {
+  int segment = segment_of_[static_cast<std::size_t>(keyframe)];
+  while (segment_parent_[static_cast<std::size_t>(segment)] != segment) {
+    segment = segment_parent_[static_cast<std::size_t>(segment)];
+  }
+  return segment;
+}
+
+int LoopGraph::newestOfAnotherSegment(int query) const {
+  const int root = rootOf(query);
+  for (int segment = segment_of_[static_cast<std::size_t>(query)]; segment-- > 0;) {
+    const int last = segment_start_[static_cast<std::size_t>(segment) + 1] - 1;
+    if (rootOf(last) != root) return last;
+  }
+  return -1;
 }
 
 void LoopGraph::add(const fusion::KeyframeRecord& record, bool depth_thinned) {
@@ -102,6 +123,13 @@ void LoopGraph::add(const fusion::KeyframeRecord& record, bool depth_thinned) {
     odometry_.push_back(edge);
     stats_.information_ms += msSince(start);
   }
+  if (key.starts_segment) {
+    const int segment = static_cast<int>(segment_start_.size());
+    segment_start_.push_back(key.id);
+    segment_parent_.push_back(segment);
+    stats_.segments = segment_start_.size();
+  }
+  segment_of_.push_back(static_cast<int>(segment_start_.size()) - 1);
   if (node) nodes_.push_back(key.id);
   node_of_.push_back(nodes_.size() - 1);
   keyframes_.push_back(std::move(key));
@@ -116,12 +144,17 @@ void LoopGraph::add(const fusion::KeyframeRecord& record, bool depth_thinned) {
   place.neighbours = config_.neighbours_per_descriptor;
   place.min_votes = config_.min_votes;
   place.max_candidates = config_.candidates_per_query;
-  place.newest_allowed = static_cast<int>(last_far - keyframes_.begin()) - 1;
+  // ... or any keyframe of a segment not joined to the query's: odometry does not link them.
+  const int unjoined = newestOfAnotherSegment(query.id);
+  place.newest_allowed = std::max(static_cast<int>(last_far - keyframes_.begin()) - 1, unjoined);
   const auto lookup_start = std::chrono::steady_clock::now();
   std::vector<PlaceCandidate> candidates;
   const bool following_revisit = last_revisit_query_ >= 0 &&
                                  query.id - last_revisit_query_ <= config_.confirm_within_keyframes;
-  const bool lookup = following_revisit || query.id % config_.query_every_n_keyframes == 0;
+  // A segment not joined to the first looks itself up at every keyframe until it is.
+  const bool adrift = rootOf(query.id) != rootOf(0);
+  const bool lookup =
+      following_revisit || adrift || query.id % config_.query_every_n_keyframes == 0;
   if (lookup && place.newest_allowed >= 0) {
     candidates = index_.query(strongestDescriptors(query.features, config_.query_descriptors), place);
   }
@@ -131,7 +164,8 @@ void LoopGraph::add(const fusion::KeyframeRecord& record, bool depth_thinned) {
   stats_.place_index_ms += msSince(index_start);
 
   for (const PlaceCandidate& candidate : candidates) {
-    if (!withinView(candidate.keyframe, query.id)) continue;
+    const bool joins = rootOf(candidate.keyframe) != rootOf(query.id);
+    if (!joins && !withinView(candidate.keyframe, query.id)) continue;
     ++stats_.candidates_checked;
     std::string why;
     const auto verify_start = std::chrono::steady_clock::now();
@@ -141,7 +175,7 @@ void LoopGraph::add(const fusion::KeyframeRecord& record, bool depth_thinned) {
     if (!revisit) continue;
     ++stats_.revisits_verified;
     last_revisit_query_ = query.id;
-    if (!withinDrift(candidate.keyframe, query.id, *revisit)) {
+    if (!joins && !withinDrift(candidate.keyframe, query.id, *revisit)) {
       ++stats_.rejected_as_drift;
       spdlog::debug("loop: keyframe {} -> {} rejected: more correction than drift explains",
                          query.id, candidate.keyframe);
@@ -149,7 +183,7 @@ void LoopGraph::add(const fusion::KeyframeRecord& record, bool depth_thinned) {
     }
     // Accepted when an earlier revisit in the window agrees; accepted revisits stay in the
     // window so that the next ones can be confirmed by them.
-    Pending loop{query.id, candidate.keyframe, *revisit, false};
+    Pending loop{query.id, candidate.keyframe, *revisit, false, joins};
     for (Pending& earlier : pending_) {
       if (earlier.query == query.id || !agree(earlier, loop)) continue;
       if (!earlier.accepted) acceptLoop(earlier);
@@ -180,7 +214,15 @@ void LoopGraph::acceptLoop(const Pending& loop) {
   if (stats_.optimisations == 0 || translationBetween(implied, now) > config_.reoptimise_m) {
     dirty_ = true;
   }
-  loops_.push_back({loop.match, loop.query, loop.revisit, false});
+  loops_.push_back({loop.match, loop.query, loop.revisit, false, loop.joins});
+  const int query_root = rootOf(loop.query), match_root = rootOf(loop.match);
+  if (query_root != match_root) {
+    // The newer segment joins the older one: the root stays the oldest segment.
+    segment_parent_[static_cast<std::size_t>(std::max(query_root, match_root))] =
+        std::min(query_root, match_root);
+    ++stats_.segments_joined;
+    spdlog::info("loop: keyframe {} joins its segment to keyframe {}'s", loop.query, loop.match);
+  }
 }
 
 void LoopGraph::finish() {
@@ -223,6 +265,12 @@ void LoopGraph::optimise() {
   double drift_distance_m = 0.0;
   for (const LoopEdge& loop : loops_) {
     drift_distance_m = std::max(drift_distance_m, driftBound(loop.match, loop.query));
+    if (loop.joins) {
+      // A join moves its segment by the restart's jump, whatever the drift bound.
+      const core::Isometry implied = keyPose(loop.match) * loop.revisit.T_query_match.inverse();
+      drift_distance_m =
+          std::max(drift_distance_m, translationBetween(implied, keyPose(loop.query)));
+    }
   }
   const GraphSolution solution =
       optimisePoseGraph(initial, edges, config_.edge_prune_threshold, drift_distance_m);

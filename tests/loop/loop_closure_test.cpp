@@ -148,7 +148,8 @@ struct TwoPasses {
   std::vector<core::Isometry> second_truth;
 };
 
-void walkTwice(TwoPasses& passes, const core::Isometry& offset) {
+// With `restart` the second pass starts a tracking segment (the tracker lost the camera).
+void walkTwice(TwoPasses& passes, const core::Isometry& offset, bool restart = false) {
   const synthetic::Scene office = scene("office.yaml");
   for (int pass = 0; pass < 2; ++pass) {
     for (int frame = 0; frame <= 100; frame += 20) {
@@ -156,6 +157,7 @@ void walkTwice(TwoPasses& passes, const core::Isometry& offset) {
       const core::Isometry tracked = pass == 0 ? truth : core::Isometry(offset * truth);
       auto record = keyframeOf(test::officeFrameAt(office, truth, 1000 * pass + frame), tracked);
       record.timestamp_ns += pass * 10'000'000'000LL;
+      record.starts_segment = restart && pass == 1 && frame == 0;
       passes.graph.add(record);
       if (pass == 1) passes.second_truth.push_back(truth);
     }
@@ -190,6 +192,40 @@ TEST(LoopGraph, ASecondPassWithDriftClosesTheLoopAndTakesTheDriftOut) {
     EXPECT_LT(after, 0.03) << "keyframe " << i << " of the second pass, " << before
                            << " m off before";
   }
+}
+
+// The error of each second-pass keyframe's corrected position, metres.
+std::vector<double> secondPassErrors(const TwoPasses& passes) {
+  const auto& corrected = passes.graph.correctedPoses();
+  const std::size_t first_of_second = corrected.size() - passes.second_truth.size();
+  std::vector<double> errors;
+  for (std::size_t i = 0; i < passes.second_truth.size(); ++i) {
+    errors.push_back(
+        (corrected[first_of_second + i].translation() - passes.second_truth[i].translation())
+            .norm());
+  }
+  return errors;
+}
+
+TEST(LoopGraph, ASegmentAfterALossIsJoinedAcrossAJumpLargerThanTheDriftBound) {
+  // Tracking restarted at a guessed pose 1.2 m and 25 degrees off: four times the drift bound
+  // (0.3 m + 5 % of the path), and 1.2 m nearer than the travel bound allows a revisit.
+  const core::Isometry jump = core::Isometry(Eigen::Translation3d(0.9, 0.6, -0.5)) *
+                              Eigen::AngleAxisd(25.0 * M_PI / 180.0, Eigen::Vector3d::UnitY());
+  LoopConfig config = twoPassConfig();
+  config.min_travel_m = 4.0;
+  TwoPasses passes{LoopGraph(config), {}};
+  walkTwice(passes, jump, true);
+  const LoopStats& stats = passes.graph.stats();
+  EXPECT_EQ(stats.segments, 2u);
+  EXPECT_EQ(stats.segments_joined, 1u);
+  EXPECT_GE(stats.loop_closures, 2u);
+  for (const double error : secondPassErrors(passes)) EXPECT_LT(error, 0.03);
+
+  // The same jump without the restart is more than drift: no loop.
+  TwoPasses drifted{LoopGraph(config), {}};
+  walkTwice(drifted, jump, false);
+  EXPECT_EQ(drifted.graph.stats().loop_closures, 0u);
 }
 
 TEST(LoopGraph, TwoIdenticalRoomsCloseNoLoop) {

@@ -8,6 +8,12 @@
 // explain (max_drift_*), and (2) another revisit within a few keyframes implies the same
 // correction. The pose graph's line process then prunes loops that still disagree.
 //
+// Segments: tracking that restarted after a loss starts a segment at a guessed pose, linked to
+// the one before by no measurement. Until a revisit joins it to an earlier segment, its
+// keyframes look themselves up among every keyframe of the other segments, however near in
+// path or far in position, and a revisit across segments is not held to the drift bound (a
+// restart's jump is not drift); it is still confirmed by a second one.
+//
 // Thread-safety: none; loop_closer.h runs it on a worker thread.
 #include <cstddef>
 #include <memory>
@@ -28,7 +34,8 @@ struct LoopEdge {
   int match = -1;  // the earlier keyframe
   int query = -1;  // the keyframe that came back to it
   Revisit revisit;
-  bool kept = false;  // in the graph after the last optimisation
+  bool kept = false;   // in the graph after the last optimisation
+  bool joins = false;  // between segments not joined before it (no drift bound)
 };
 
 struct LoopStats {
@@ -39,6 +46,8 @@ struct LoopStats {
   std::size_t rejected_unconfirmed = 0;  // no second revisit agreed in time
   std::size_t rejected_by_graph = 0;     // pruned by the line process
   std::size_t loop_closures = 0;         // loop edges in the optimised graph
+  std::size_t segments = 0;              // tracking segments (1 + restarts)
+  std::size_t segments_joined = 0;       // joins of a segment to an earlier one
   std::size_t optimisations = 0;
   double pose_graph_ms = 0.0;  // all optimisations together
   double keyframe_ms = 0.0;    // all keyframes' work together, optimisations included
@@ -84,6 +93,7 @@ class LoopGraph {
     int match = -1;
     Revisit revisit;
     bool accepted = false;  // confirmed, and a loop edge
+    bool joins = false;     // across segments not yet joined
   };
   // The pose of `query` that `revisit` from `match` implies, from match's corrected pose.
   core::Isometry impliedPose(int match, int query, const Revisit& revisit) const;
@@ -94,6 +104,10 @@ class LoopGraph {
   // Whether the two keyframes' corrected positions are near enough to see one place.
   bool withinView(int match, int query) const;
   bool agree(const Pending& a, const Pending& b) const;
+  // Segments, joined ones sharing a root (union-find over segment ids).
+  int rootOf(int keyframe) const;
+  // The newest keyframe of a segment not joined to `query`'s, or -1.
+  int newestOfAnotherSegment(int query) const;
   void acceptLoop(const Pending& loop);
   void optimise();
 
@@ -108,6 +122,9 @@ class LoopGraph {
   std::vector<GraphEdge> odometry_;
   std::vector<LoopEdge> loops_;
   std::vector<Pending> pending_;
+  std::vector<int> segment_of_;      // per keyframe
+  std::vector<int> segment_start_;   // per segment, its first keyframe
+  std::vector<int> segment_parent_;  // per segment, union-find parent
   int last_revisit_query_ = -1;  // the last keyframe whose lookup verified a revisit
   bool dirty_ = false;  // loops added since the last optimisation
   LoopStats stats_;
