@@ -15,6 +15,7 @@
 
 #include "tessera/core/error.h"
 #include "tessera/core/registration.h"
+#include "tessera/fusion/place_index.h"
 
 namespace tessera::fusion {
 
@@ -32,6 +33,9 @@ void readConfig(const core::ConfigSection& section, TrackerConfig& config) {
   section.read("constant_velocity", config.constant_velocity);
   section.read("feature_gap_s", config.feature_gap_s);
   section.read("relocalisation_keyframes", config.relocalisation_keyframes);
+  section.read("relocalise_against_all_keyframes", config.relocalise_against_all_keyframes);
+  section.read("relocalisation_candidates", config.relocalisation_candidates);
+  section.read("relocalisation_min_votes", config.relocalisation_min_votes);
   if (config.max_depth_m <= config.min_depth_m || config.max_translation_m <= 0.0 ||
       config.max_rotation_deg <= 0.0 || config.lost_frames_before_restart < 1) {
     throw core::ConfigError(
@@ -47,9 +51,11 @@ void readConfig(const core::ConfigSection& section, TrackerConfig& config) {
   if (config.tracking_scale != 1 && config.tracking_scale != 2 && config.tracking_scale != 4) {
     throw core::ConfigError("tracker: tracking_scale must be 1, 2 or 4");
   }
-  if (config.feature_gap_s <= 0.0 || config.relocalisation_keyframes < 1) {
+  if (config.feature_gap_s <= 0.0 || config.relocalisation_keyframes < 1 ||
+      config.relocalisation_candidates < 1 || config.relocalisation_min_votes < 1) {
     throw core::ConfigError(
-        "tracker: feature_gap_s must be positive and relocalisation_keyframes >= 1");
+        "tracker: feature_gap_s must be positive, relocalisation_keyframes, "
+        "relocalisation_candidates and relocalisation_min_votes >= 1");
   }
   if (config.keyframe_translation_m < 0.0 || config.keyframe_rotation_deg < 0.0) {
     throw core::ConfigError(
@@ -171,10 +177,20 @@ struct TrackedImages {
 };
 
 struct Keyframe {
+  int id = 0;            // in the order made
   TrackedImages images;  // odometry cache built for the destination role
   core::Isometry T_W_C = core::Isometry::Identity();
   FeatureFrame features;
 };
+
+// A keyframe as kept for relocalisation once its images are dropped.
+struct PastKeyframe {
+  core::Isometry T_W_C = core::Isometry::Identity();
+  FeatureFrame features;
+};
+
+// The query descriptors of a relocalisation lookup (the strongest corners; as loop closure's).
+constexpr int kRelocalisationQueryDescriptors = 300;
 
 }  // namespace
 
@@ -187,6 +203,11 @@ struct Tracker::State {
   // newest keyframe (back) is tracked against; the others are kept to relocalise against.
   std::deque<std::shared_ptr<Keyframe>> keyframes;
   std::shared_ptr<Keyframe> reference;  // the keyframe frames are tracked against
+  // Every keyframe so far, by id, and their descriptors in a place index: what a frame that
+  // none of the recent keyframes recognises is looked up in.
+  std::vector<PastKeyframe> past;
+  PlaceIndex places;
+  int keyframes_made = 0;
   // The last tracked frame: its images, pose and time.
   TrackedImages previous;
   core::Isometry T_W_previous = core::Isometry::Identity();
@@ -249,9 +270,14 @@ TrackingResult Tracker::track(const core::Frame& frame, const core::Isometry& in
                                 std::int64_t timestamp_ns, bool starts_segment) {
     if (!prepare(images.odometry, cv::rgbd::OdometryFrame::CACHE_DST)) return false;
     auto keyframe = std::make_shared<Keyframe>();
+    keyframe->id = s.keyframes_made++;
     keyframe->images = images;
     keyframe->T_W_C = T_W_C;
     keyframe->features = describeFeatures(images.grey, images.depth_m, k, config_.features);
+    if (config_.relocalise_against_all_keyframes) {
+      s.past.push_back({T_W_C, keyframe->features});
+      s.places.add(keyframe->id, keyframe->features.descriptors);
+    }
     auto record = std::make_shared<KeyframeRecord>();
     record->timestamp_ns = timestamp_ns;
     record->T_W_C = T_W_C;
@@ -364,6 +390,28 @@ TrackingResult Tracker::track(const core::Frame& frame, const core::Isometry& in
       if (!T_W_C) T_W_C = T_W_guess;  // the feature pose alone: still better than none
       s.reference = *it;
       status = TrackingStatus::kRelocalised;
+    }
+    if (!T_W_C && config_.relocalise_against_all_keyframes && !s.keyframes.empty()) {
+      // Older keyframes: the most voted first; the feature pose alone (their images are gone),
+      // and the frame becomes a keyframe that starts a segment there.
+      PlaceQuery query;
+      query.min_votes = config_.relocalisation_min_votes;
+      query.max_candidates = config_.relocalisation_candidates;
+      query.newest_allowed = s.keyframes.front()->id - 1;  // the recent ones were tried
+      if (!current_features) {
+        current_features = describeFeatures(current.grey, current.depth_m, k, config_.features);
+      }
+      for (const PlaceCandidate& candidate : s.places.query(
+               strongestDescriptors(*current_features, kRelocalisationQueryDescriptors), query)) {
+        const PastKeyframe& key = s.past[static_cast<std::size_t>(candidate.keyframe)];
+        const auto pose = estimateFeaturePose(key.features, *current_features, k, config_.features);
+        if (!pose) continue;
+        const core::Isometry found = key.T_W_C * pose->T_current_reference.inverse();
+        if (!makeKeyframe(current, found, frame.timestamp_ns, true)) break;
+        result.from_features = true;
+        result.relocalised_globally = true;
+        return accept(TrackingStatus::kRelocalised, found, 0);
+      }
     }
     if (!T_W_C && s.interrupted) {
       result.problem = "not relocalised after the source was interrupted";

@@ -139,7 +139,7 @@ void LoopGraph::add(const fusion::KeyframeRecord& record, bool depth_thinned) {
   const auto last_far = std::upper_bound(
       keyframes_.begin(), keyframes_.end(), query.travel_m - config_.min_travel_m,
       [](double travel, const KeyframeView& k) { return travel < k.travel_m; });
-  PlaceQuery place;
+  fusion::PlaceQuery place;
   place.max_distance = config_.max_descriptor_distance;
   place.neighbours = config_.neighbours_per_descriptor;
   place.min_votes = config_.min_votes;
@@ -148,7 +148,7 @@ void LoopGraph::add(const fusion::KeyframeRecord& record, bool depth_thinned) {
   const int unjoined = newestOfAnotherSegment(query.id);
   place.newest_allowed = std::max(static_cast<int>(last_far - keyframes_.begin()) - 1, unjoined);
   const auto lookup_start = std::chrono::steady_clock::now();
-  std::vector<PlaceCandidate> candidates;
+  std::vector<fusion::PlaceCandidate> candidates;
   const bool following_revisit = last_revisit_query_ >= 0 &&
                                  query.id - last_revisit_query_ <= config_.confirm_within_keyframes;
   // A segment not joined to the first looks itself up at every keyframe until it is.
@@ -156,14 +156,15 @@ void LoopGraph::add(const fusion::KeyframeRecord& record, bool depth_thinned) {
   const bool lookup =
       following_revisit || adrift || query.id % config_.query_every_n_keyframes == 0;
   if (lookup && place.newest_allowed >= 0) {
-    candidates = index_.query(strongestDescriptors(query.features, config_.query_descriptors), place);
+    candidates = index_.query(
+        fusion::strongestDescriptors(query.features, config_.query_descriptors), place);
   }
   stats_.place_lookup_ms += msSince(lookup_start);
   const auto index_start = std::chrono::steady_clock::now();
   index_.add(query.id, query.features.descriptors);
   stats_.place_index_ms += msSince(index_start);
 
-  for (const PlaceCandidate& candidate : candidates) {
+  for (const fusion::PlaceCandidate& candidate : candidates) {
     const bool joins = rootOf(candidate.keyframe) != rootOf(query.id);
     if (!joins && !withinView(candidate.keyframe, query.id)) continue;
     ++stats_.candidates_checked;

@@ -164,6 +164,8 @@ void LoopFigures::addTo(json& report) const {
   report["loops_rejected_as_drift"] = loops.rejected_as_drift;
   report["loops_rejected_unconfirmed"] = loops.rejected_unconfirmed;
   report["loops_rejected_by_graph"] = loops.rejected_by_graph;
+  report["tracking_segments"] = loops.segments;
+  report["segments_joined"] = loops.segments_joined;
   report["pose_graph_optimisations"] = loops.optimisations;
   report["pose_graph_ms"] = loops.pose_graph_ms;
   report["loop_keyframe_ms"] = loops.keyframe_ms;

@@ -229,6 +229,36 @@ TEST(Tracker, RelocalisesAfterAReconnectWithTheCameraMoved) {
   EXPECT_LT(translationError(after.T_W_C, *next.T_W_C_gt), 0.015);
 }
 
+TEST(Tracker, ALostFrameIsRelocalisedAgainstAKeyframeFromTheStartOfTheRun) {
+  // Every 3rd frame of the office walk's first 150 (about 2 m), then the camera is back near
+  // the start, 5 cm and 5 degrees from frame 0, where none of the last 10 keyframes sees it.
+  const synthetic::Scene scene =
+      synthetic::loadScene(test::sourceDir() / "config/scenes/office.yaml");
+  const auto walkThenReturn = [&](const TrackerConfig& config) {
+    Tracker tracker(config);
+    for (int i = 0; i < 150; i += 3) {
+      const core::Frame frame = timedOfficeFrame(scene, i);
+      EXPECT_NE(tracker.track(frame, *frame.T_W_C_gt).status, TrackingStatus::kLost) << i;
+    }
+    tracker.sourceInterrupted();
+    core::Frame back = officeFrameAt(scene, moved(scene.cameraPose(0), {0.05, 0.0, 0.0}, 5.0), 500);
+    back.timestamp_ns = 10'000'000'000;
+    return std::pair{tracker.track(back, core::Isometry::Identity()), *back.T_W_C_gt};
+  };
+  const auto [found, truth] = walkThenReturn(TrackerConfig{});
+  ASSERT_EQ(found.status, TrackingStatus::kRelocalised) << found.problem;
+  EXPECT_TRUE(found.relocalised_globally);
+  EXPECT_LT(translationError(found.T_W_C, truth), 0.02);
+  EXPECT_LT(rotationErrorDeg(found.T_W_C, truth), 1.0);
+  ASSERT_EQ(found.new_keyframes.size(), 1u);
+  EXPECT_TRUE(found.new_keyframes.front()->starts_segment);
+
+  // Only the recent keyframes: not found again.
+  TrackerConfig recent_only;
+  recent_only.relocalise_against_all_keyframes = false;
+  EXPECT_NE(walkThenReturn(recent_only).first.status, TrackingStatus::kRelocalised);
+}
+
 TEST(Tracker, TracksTheRealDiningRoomKeyframesWithinTenCentimetres) {
   // Five real Kinect frames 23 to 73 cm and 4 to 25 degrees apart: beyond dense odometry, so
   // each step is posed from features and refined. Frame-to-frame odometry ended 765 mm off.

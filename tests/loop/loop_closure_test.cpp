@@ -15,8 +15,8 @@
 #include "support/test_data.h"
 #include "tessera/core/registration.h"
 #include "tessera/drivers/synthetic/scene.h"
+#include "tessera/fusion/place_index.h"
 #include "tessera/loop/loop_graph.h"
-#include "tessera/loop/place_index.h"
 #include "tessera/loop/pose_graph.h"
 #include "tessera/loop/revisit.h"
 
@@ -50,7 +50,7 @@ KeyframeView viewOf(const fusion::KeyframeRecord& record, int id, const LoopConf
 TEST(PlaceRecognition, FindsARenderedRevisitAndNotADistinctPlace) {
   const synthetic::Scene loop_scene = scene("loop.yaml");
   const LoopConfig config;
-  PlaceIndex index(4);
+  fusion::PlaceIndex index(4);
   std::vector<KeyframeView> keyframes;
   for (int frame = 0; frame <= 200; frame += 20) {
     const core::Isometry pose = loop_scene.cameraPose(frame);
@@ -58,7 +58,7 @@ TEST(PlaceRecognition, FindsARenderedRevisitAndNotADistinctPlace) {
     keyframes.push_back(viewOf(record, static_cast<int>(keyframes.size()), config));
     index.add(keyframes.back().id, record.features.descriptors);
   }
-  PlaceQuery query;
+  fusion::PlaceQuery query;
   query.min_votes = config.min_votes;
   query.max_candidates = config.candidates_per_query;
 
@@ -67,12 +67,12 @@ TEST(PlaceRecognition, FindsARenderedRevisitAndNotADistinctPlace) {
   const auto revisit =
       keyframeOf(test::officeFrameAt(loop_scene, revisit_pose, 8401), revisit_pose);
   const auto found =
-      index.query(strongestDescriptors(revisit.features, config.query_descriptors), query);
+      index.query(fusion::strongestDescriptors(revisit.features, config.query_descriptors), query);
   // The loop graph checks the candidates in turn: the first that passes is the place revisited.
   std::string why;
   std::optional<Revisit> checked;
   const KeyframeView* match = nullptr;
-  for (const PlaceCandidate& candidate : found) {
+  for (const fusion::PlaceCandidate& candidate : found) {
     match = &keyframes[static_cast<std::size_t>(candidate.keyframe)];
     checked = verifyRevisit(*match, viewOf(revisit, 100, config), config, why);
     if (checked) break;
@@ -92,8 +92,8 @@ TEST(PlaceRecognition, FindsARenderedRevisitAndNotADistinctPlace) {
   // The north corridor: no candidate passes the check.
   const core::Isometry elsewhere = loop_scene.cameraPose(700);
   const auto distinct = keyframeOf(test::officeFrameAt(loop_scene, elsewhere, 7002), elsewhere);
-  for (const PlaceCandidate& candidate :
-       index.query(strongestDescriptors(distinct.features, config.query_descriptors), query)) {
+  for (const fusion::PlaceCandidate& candidate : index.query(
+           fusion::strongestDescriptors(distinct.features, config.query_descriptors), query)) {
     EXPECT_FALSE(verifyRevisit(keyframes[static_cast<std::size_t>(candidate.keyframe)],
                                viewOf(distinct, 101, config), config, why))
         << "a view of the north corridor passed as keyframe " << candidate.keyframe;

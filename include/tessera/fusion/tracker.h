@@ -3,7 +3,8 @@
 // terms over a coarse-to-fine pyramid) of each frame against a keyframe, started from a
 // constant-velocity guess. Across large motions (a gap in time, a failed solve) the guess
 // comes from features (ORB, 3D-2D PnP against the keyframe); after a loss or an interrupted
-// source the frame is relocalised against recent keyframes before tracking goes on.
+// source the frame is relocalised against recent keyframes, then against every keyframe so far
+// (found through a place index), before tracking goes on.
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -40,14 +41,22 @@ struct TrackerConfig {
   // A frame taken more than this after the last tracked one (frames dropped, a keyframe
   // recording) is first posed from features, then refined densely, seconds.
   double feature_gap_s = 0.05;
-  // Keyframes kept (with their features) to relocalise against after a loss or a reconnect.
+  // Keyframes kept (with their images, for a dense refinement) to relocalise against after a
+  // loss or a reconnect.
   int relocalisation_keyframes = 10;
+  // When none of those gives a pose: look the frame up among every keyframe so far (their
+  // features, in a place index) and take the feature pose of the first candidate that gives
+  // one. The frame then starts a segment, which loop closure joins to the old keyframe's.
+  bool relocalise_against_all_keyframes = true;
+  int relocalisation_candidates = 3;  // the most voted keyframes tried, in turn
+  int relocalisation_min_votes = 12;  // descriptors near a keyframe's for it to be one
   FeaturePoseConfig features;  // config section tracker_features
 };
 
 void readConfig(const core::ConfigSection& section, TrackerConfig& config);
 
-// kRelocalised: found again against a recent keyframe after a loss or a source interruption.
+// kRelocalised: found again after a loss or a source interruption, against a recent keyframe,
+// or against an older one (then a new segment starts at the pose it gives).
 // kRestarted: not found again; a new segment starts at the last good pose.
 enum class TrackingStatus { kFirst, kTracked, kLost, kRelocalised, kRestarted };
 
@@ -59,7 +68,8 @@ struct KeyframeRecord {
   FeatureFrame features;
   cv::Mat depth_m;  // CV_32FC1 at the frame's size; shared with the tracker, not to be written
   core::Intrinsics intrinsics;
-  // Tracking restarted here after a loss: its pose does not follow from the keyframe before.
+  // Tracking restarted here after a loss, or was relocalised against an old keyframe: its pose
+  // does not follow from the keyframe before by odometry.
   bool starts_segment = false;
 };
 
@@ -67,6 +77,7 @@ struct TrackingResult {
   TrackingStatus status = TrackingStatus::kFirst;
   core::Isometry T_W_C = core::Isometry::Identity();  // valid unless kLost
   bool from_features = false;                         // the solve started from a feature pose
+  bool relocalised_globally = false;  // kRelocalised against a keyframe older than the recent
   std::string problem;                                // why tracking was lost
   // Keyframes made while tracking this frame (the last tracked frame may become one too).
   std::vector<std::shared_ptr<const KeyframeRecord>> new_keyframes;

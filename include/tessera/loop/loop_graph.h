@@ -21,10 +21,10 @@
 #include <vector>
 
 #include "tessera/core/trajectory.h"
+#include "tessera/fusion/place_index.h"
 #include "tessera/fusion/tracker.h"
 #include "tessera/loop/loop_config.h"
 #include "tessera/loop/map_correction.h"
-#include "tessera/loop/place_index.h"
 #include "tessera/loop/pose_graph.h"
 #include "tessera/loop/revisit.h"
 
@@ -112,7 +112,7 @@ class LoopGraph {
   void optimise();
 
   LoopConfig config_;
-  PlaceIndex index_;
+  fusion::PlaceIndex index_;
   std::vector<KeyframeView> keyframes_;
   std::vector<core::Isometry> corrected_;
   // The graph's nodes (keyframe ids, ascending), each keyframe's node (the last at or before

@@ -1,4 +1,4 @@
-#include "tessera/loop/place_index.h"
+#include "tessera/fusion/place_index.h"
 
 #include <algorithm>
 #include <map>
@@ -8,7 +8,7 @@
 #include <opencv2/core/hal/hal.hpp>
 #include <opencv2/flann.hpp>
 
-namespace tessera::loop {
+namespace tessera::fusion {
 
 namespace {
 // LSH parameters: 6 hash tables with 14-bit keys, no multi-probe. Measured on the loop scene
@@ -56,7 +56,7 @@ void PlaceIndex::add(int id, const cv::Mat& descriptors) {
   }
 }
 
-cv::Mat strongestDescriptors(const fusion::FeatureFrame& features, int count) {
+cv::Mat strongestDescriptors(const FeatureFrame& features, int count) {
   if (features.descriptors.rows <= count) return features.descriptors;
   std::vector<int> order(features.keypoints.size());
   std::iota(order.begin(), order.end(), 0);
@@ -125,4 +125,4 @@ std::vector<PlaceCandidate> PlaceIndex::query(const cv::Mat& descriptors,
   return out;
 }
 
-}  // namespace tessera::loop
+}  // namespace tessera::fusion

@@ -9,7 +9,8 @@
 // re-indexed O(log n) times. The newest keyframes, not yet a unit, are searched linearly; they
 // are usually too recent to be revisit candidates and then skipped.
 //
-// Thread-safety: none; owned by the loop closer's worker.
+// Thread-safety: none; each user owns one (the tracker, to relocalise a lost frame; the loop
+// closer's worker, to find revisits).
 #include <cstddef>
 #include <memory>
 #include <vector>
@@ -22,7 +23,7 @@ namespace cv::flann {
 class Index;
 }
 
-namespace tessera::loop {
+namespace tessera::fusion {
 
 struct PlaceCandidate {
   int keyframe = -1;  // id given to add()
@@ -39,7 +40,7 @@ struct PlaceQuery {
 
 // The descriptors of the `count` keypoints of `features` with the strongest response (ORB's
 // corner score): a query's votes come from them.
-cv::Mat strongestDescriptors(const fusion::FeatureFrame& features, int count);
+cv::Mat strongestDescriptors(const FeatureFrame& features, int count);
 
 class PlaceIndex {
  public:
@@ -76,4 +77,4 @@ class PlaceIndex {
   std::vector<Batch> batches_;      // oldest first; rows after the last are the tail
 };
 
-}  // namespace tessera::loop
+}  // namespace tessera::fusion
