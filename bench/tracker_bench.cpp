@@ -54,6 +54,9 @@ int main(int argc, char** argv) {
                  "Pose from features first after this gap, s");
   app.add_option("--iterations", iterations, "Iterations per pyramid level, finest first");
   app.add_flag("--no-velocity", no_velocity, "Start each solve from no motion");
+  app.add_option("--lost-frames", config.lost_frames_before_restart,
+                 "Lost frames in a row before tracking restarts")
+      ->check(CLI::PositiveNumber);
   app.add_flag("--verbose", verbose, "Print each frame whose step is off by more than 5 mm");
   app.add_option("--intrinsics", intrinsics_spec, "fx,fy,cx,cy as given to tessera run");
   app.add_option("--depth-scale", depth_units_per_m, "Raw depth units per metre");
