@@ -233,15 +233,20 @@ nlohmann::json evaluateRunViews(const std::filesystem::path& run_dir, core::Fram
   const RenderMesh patches = readTexturedMap(run_dir / options.map_file);
   const RenderMesh mesh = readColouredPly(run_dir / "mesh.ply");
   const core::Trajectory poses = core::readTumTrajectory(run_dir / "trajectory.txt");
-  // After a loop closure the patch map lies in the frame of the corrected poses; the TSDF
-  // mesh stays in the tracked one.
+  // After a loop closure the patch map lies in the frame of the corrected poses; so does the
+  // TSDF mesh when it was fused again at them (report: tsdf_corrected), else it stays in the
+  // tracked one.
   const auto closed_path = run_dir / "trajectory_closed.txt";
   const std::optional<core::Trajectory> closed =
       std::filesystem::exists(closed_path) ? std::optional(core::readTumTrajectory(closed_path))
                                            : std::nullopt;
-  const ViewEvaluation views = evaluateViews(
-      {{"patches", &patches, closed ? &*closed : nullptr}, {"mesh", &mesh, nullptr}}, frames,
-      poses, options);
+  const auto corrected = report.find("tsdf_corrected");
+  const bool mesh_corrected =
+      corrected != report.end() && corrected->is_boolean() && corrected->get<bool>();
+  const ViewEvaluation views =
+      evaluateViews({{"patches", &patches, closed ? &*closed : nullptr},
+                     {"mesh", &mesh, closed && mesh_corrected ? &*closed : nullptr}},
+                    frames, poses, options);
   if (views.views.empty()) {
     throw core::Error(fmt::format(
         "{}: no view could be scored: none of its frames has a pose in {} with patches in "

@@ -38,6 +38,7 @@ void readConfig(const core::ConfigSection& section, TsdfConfig& config) {
   section.read("integration_scale", config.integration_scale);
   section.read("integrate_every_n_frames", config.integrate_every_n_frames);
   section.read("release_distance_m", config.release_distance_m);
+  section.read("correct_after_loop_closure", config.correct_after_loop_closure);
   if (config.voxel_size_m <= 0.0 || config.truncation_m < config.voxel_size_m) {
     throw core::ConfigError(
         "tsdf: voxel_size_m must be positive and truncation_m at least one voxel");

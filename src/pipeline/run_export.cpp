@@ -1,10 +1,13 @@
+#include <chrono>
 #include <filesystem>
 #include <map>
 #include <set>
 
 #include <fmt/format.h>
+#include <spdlog/spdlog.h>
 
 #include "internal/run_parts.h"
+#include "tessera/core/error.h"
 #include "tessera/map_export/map_files.h"
 #include "tessera/map_export/patch_files.h"
 #include "tessera/texture/bitmap_export.h"
@@ -58,11 +61,45 @@ reuse::Economy bindMapTextures(const db::TextureStore& store, const CommitStage&
   return reuse::economyOf(map);
 }
 
+// The TSDF's surface: fused again at the corrected poses when loop closure moved keyframes
+// (and the frames kept for it are there), else as fused.
+fusion::SurfaceMesh finalMesh(RunParts& parts, LoopFigures& loops) {
+  const fusion::ReintegrationLog* log = parts.integration.reintegrationLog();
+  if (log != nullptr) {
+    loops.tsdf_frames_kept = log->size();
+    loops.tsdf_frames_kept_bytes = log->diskBytes();
+  }
+  if (!parts.loop_closer || log == nullptr || log->size() == 0 ||
+      parts.loop_closer->graph().stats().optimisations == 0) {
+    return parts.integration.map().extractMesh();
+  }
+  if (!log->usable()) {
+    spdlog::warn("mesh.ply stays at the tracked poses: {}", log->error());
+    return parts.integration.map().extractMesh();
+  }
+  const auto start = std::chrono::steady_clock::now();
+  const loop::MapCorrection correction = parts.loop_closer->graph().correction();
+  try {
+    fusion::SurfaceMesh mesh =
+        log->rebuild(parts.integration.map().config(),
+                     [&correction](std::int64_t anchor_ns) { return correction.at(anchor_ns); });
+    loops.tsdf_corrected = true;
+    loops.tsdf_correction_s =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    spdlog::info("TSDF fused again at the corrected poses from {} keyframes in {:.1f} s",
+                 log->size(), loops.tsdf_correction_s);
+    return mesh;
+  } catch (const core::Error& e) {
+    spdlog::warn("mesh.ply stays at the tracked poses: {}", e.what());
+    return parts.integration.map().extractMesh();
+  }
+}
+
 }  // namespace
 
 void exportRun(RunParts& parts, const RunOptions& options, RunSummary& summary) {
   // The mesh is written even when the source ended abnormally, so work is kept.
-  const auto mesh = parts.integration.map().extractMesh();
+  const auto mesh = finalMesh(parts, summary.loops);
   summary.exported.mesh_vertices = mesh.vertices.size();
   fusion::writePly(mesh, options.out_dir / "mesh.ply");
   const planes::PatchMap& patches = parts.planes.map();

@@ -60,6 +60,9 @@ RunParts::RunParts(core::FrameSource& input, const RunConfig& config, const RunO
       stages(source_stage, tracking, integration, planes, describe, commit, bitmaps, sink,
              loop_closer.get()) {
   planes.spillSamplesTo(sample_dir);
+  if (loop_closer && config.tsdf.correct_after_loop_closure) {
+    integration.keepFramesForCorrection(options.out_dir / "tsdf_frames");
+  }
   if (options.monitor != nullptr) {
     sink.attachMonitor(options.monitor, [this] { return source_stage.framesDroppedSoFar(); });
     options.monitor->start(input.name());

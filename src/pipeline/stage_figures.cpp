@@ -171,6 +171,10 @@ void LoopFigures::addTo(json& report) const {
   report["loop_keyframe_ms"] = loops.keyframe_ms;
   report["loop_patches_retired_in_db"] = instances_retired;
   report["loop_wait_s"] = wait_s;
+  report["tsdf_corrected"] = tsdf_corrected;
+  report["tsdf_frames_kept"] = tsdf_frames_kept;
+  report["tsdf_frames_kept_mb"] = static_cast<double>(tsdf_frames_kept_bytes) / 1e6;
+  report["tsdf_correction_s"] = tsdf_correction_s;
   report["ate_after_closure_m"] =
       ate_after_closure ? json(ate_after_closure->rmse_m) : json(nullptr);
 }

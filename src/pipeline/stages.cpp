@@ -190,6 +190,10 @@ FusedFrame IntegrationStage::process(TrackedFrame tracked) {
       if (fused.T_W_C) {
         map_.integrate(tracked.frame, *fused.T_W_C);
         fused.integrated = true;
+        if (log_ && fused.keyframe_ns && fused.keyframe_ns != last_logged_keyframe_ns_) {
+          log_->keep(tracked.frame, *fused.T_W_C, *fused.keyframe_ns);
+          last_logged_keyframe_ns_ = fused.keyframe_ns;
+        }
         if (const double distance_m = map_.config().release_distance_m; distance_m > 0.0) {
           const std::size_t released = map_.releaseBlocksBehind(*fused.T_W_C, distance_m);
           fused.figures.tsdf_blocks_released = released;
@@ -211,6 +215,10 @@ FusedFrame IntegrationStage::process(TrackedFrame tracked) {
   fused.figures.tsdf_bytes = map_.memoryBytes();
   fused.frame = std::move(tracked.frame);
   return fused;
+}
+
+void IntegrationStage::keepFramesForCorrection(const std::filesystem::path& dir) {
+  log_ = std::make_unique<fusion::ReintegrationLog>(dir, map_.config().integration_scale);
 }
 
 IntegrationFigures IntegrationStage::figures() const {

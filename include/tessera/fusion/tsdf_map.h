@@ -35,6 +35,9 @@ struct TsdfConfig {
   // geometry; every frame is still tracked and searched for planes (patch growth and texture
   // matching depend on those: fusing planes on every 2nd frame only cost the office 2 reuses).
   int integrate_every_n_frames = 2;
+  // With loop closure: keep the first integrated frame of each keyframe on disk, and fuse the
+  // volume again from them at the corrected poses at the end (ReintegrationLog).
+  bool correct_after_loop_closure = true;
 };
 
 // Reads the `tsdf:` keys of a config section into `config`.

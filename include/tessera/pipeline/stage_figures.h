@@ -145,6 +145,11 @@ struct LoopFigures {
   std::size_t instances_retired = 0;  // patches merged after a correction, out of the database
   double wait_s = 0.0;                // the end of the stream waiting for loop closure
   std::optional<core::AteResult> ate_after_closure;
+  // The TSDF fused again at the corrected poses from the frames kept per keyframe.
+  bool tsdf_corrected = false;
+  std::size_t tsdf_frames_kept = 0;
+  std::size_t tsdf_frames_kept_bytes = 0;  // on disk while the run lasted
+  double tsdf_correction_s = 0.0;
   void addTo(nlohmann::json& report) const;
 };
 

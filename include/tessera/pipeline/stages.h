@@ -15,6 +15,7 @@
 
 #include "tessera/core/frame_source.h"
 #include "tessera/core/trajectory.h"
+#include "tessera/fusion/reintegration_log.h"
 #include "tessera/fusion/tracker.h"
 #include "tessera/fusion/tsdf_map.h"
 #include "tessera/loop/map_correction.h"
@@ -144,6 +145,12 @@ class IntegrationStage {
 
   const fusion::TsdfMap& map() const { return map_; }
   IntegrationFigures figures() const;
+
+  // With loop closure: keeps the first integrated frame of each keyframe in a log under `dir`,
+  // for the TSDF to be fused again at the corrected poses at the end.
+  void keepFramesForCorrection(const std::filesystem::path& dir);
+  // The log, or null without it.
+  const fusion::ReintegrationLog* reintegrationLog() const { return log_.get(); }
   const StageTimer& timer() const { return timer_; }
 
  private:
@@ -151,6 +158,8 @@ class IntegrationStage {
   bool wantsFrame(const core::Isometry& T_W_C);
 
   fusion::TsdfMap map_;
+  std::unique_ptr<fusion::ReintegrationLog> log_;
+  std::optional<std::int64_t> last_logged_keyframe_ns_;
   std::optional<core::Isometry> last_integrated_pose_;
   int posed_since_integrated_ = 0;
   IntegrationFigures figures_;  // all but tsdf_bytes, read from the map
