@@ -29,6 +29,9 @@ cv::Mat subsampledDepth(const cv::Mat& depth_mm, int scale) {
 // takes about 30 KB instead of 150 KB as PNG.
 constexpr int kColourJpegQuality = 95;
 
+// A long run's correction says how far it is every this many frames (about 15 s).
+constexpr std::size_t kProgressEvery = 1000;
+
 }  // namespace
 
 ReintegrationLog::ReintegrationLog(std::filesystem::path dir, int scale)
@@ -111,6 +114,9 @@ SurfaceMesh ReintegrationLog::rebuild(
     const core::Isometry T_W_C = correction(entry.anchor_ns) * entry.T_W_C;
     map.integrate(frame, T_W_C);
     if (config.release_distance_m > 0.0) map.releaseBlocksBehind(T_W_C, config.release_distance_m);
+    if (index % kProgressEvery == 0 && index < entries_.size()) {
+      spdlog::info("TSDF correction: {} of {} keyframes fused again", index, entries_.size());
+    }
   }
   return map.extractMesh();
 }
