@@ -36,6 +36,8 @@ void readConfig(const core::ConfigSection& section, TrackerConfig& config) {
   section.read("relocalise_against_all_keyframes", config.relocalise_against_all_keyframes);
   section.read("relocalisation_candidates", config.relocalisation_candidates);
   section.read("relocalisation_min_votes", config.relocalisation_min_votes);
+  section.read("relocalisation_cover_radius_m", config.relocalisation_cover_radius_m);
+  section.read("relocalisation_cover_angle_deg", config.relocalisation_cover_angle_deg);
   if (config.max_depth_m <= config.min_depth_m || config.max_translation_m <= 0.0 ||
       config.max_rotation_deg <= 0.0 || config.lost_frames_before_restart < 1) {
     throw core::ConfigError(
@@ -185,9 +187,18 @@ struct Keyframe {
 
 // A keyframe as kept for relocalisation once its images are dropped.
 struct PastKeyframe {
+  int id = -1;  // the keyframe's; its place in the index is its place in State::past
   core::Isometry T_W_C = core::Isometry::Identity();
   FeatureFrame features;
 };
+
+// The place of the newest kept keyframe older than keyframe `id` in `past` (ascending ids),
+// or -1 when there is none.
+int newestKeptBefore(const std::vector<PastKeyframe>& past, int id) {
+  const auto older = std::partition_point(past.begin(), past.end(),
+                                          [id](const PastKeyframe& p) { return p.id < id; });
+  return static_cast<int>(older - past.begin()) - 1;
+}
 
 // The query descriptors of a relocalisation lookup (the strongest corners; as loop closure's).
 constexpr int kRelocalisationQueryDescriptors = 300;
@@ -203,8 +214,9 @@ struct Tracker::State {
   // newest keyframe (back) is tracked against; the others are kept to relocalise against.
   std::deque<std::shared_ptr<Keyframe>> keyframes;
   std::shared_ptr<Keyframe> reference;  // the keyframe frames are tracked against
-  // Every keyframe so far, by id, and their descriptors in a place index: what a frame that
-  // none of the recent keyframes recognises is looked up in.
+  // Every keyframe so far but revisits of a place already kept (ascending ids), and their
+  // descriptors in a place index: what a frame that none of the recent keyframes recognises
+  // is looked up in.
   std::vector<PastKeyframe> past;
   PlaceIndex places;
   int keyframes_made = 0;
@@ -265,6 +277,21 @@ TrackingResult Tracker::track(const core::Frame& frame, const core::Isometry& in
       return false;
     }
   };
+  // Whether a keyframe at T_W_C revisits the place of one kept before the recent ones.
+  const auto coveredByPast = [&](const core::Isometry& T_W_C) {
+    if (config_.relocalisation_cover_radius_m <= 0.0 || s.keyframes.empty()) return false;
+    const int recent = s.keyframes.front()->id;
+    for (const PastKeyframe& past : s.past) {
+      if (past.id >= recent) break;
+      if ((past.T_W_C.translation() - T_W_C.translation()).norm() <=
+              config_.relocalisation_cover_radius_m &&
+          core::rotationAngleDeg(past.T_W_C.inverse() * T_W_C) <=
+              config_.relocalisation_cover_angle_deg) {
+        return true;
+      }
+    }
+    return false;
+  };
   // Makes `images` (posed at T_W_C) the keyframe frames are tracked against.
   const auto makeKeyframe = [&](const TrackedImages& images, const core::Isometry& T_W_C,
                                 std::int64_t timestamp_ns, bool starts_segment) {
@@ -274,9 +301,9 @@ TrackingResult Tracker::track(const core::Frame& frame, const core::Isometry& in
     keyframe->images = images;
     keyframe->T_W_C = T_W_C;
     keyframe->features = describeFeatures(images.grey, images.depth_m, k, config_.features);
-    if (config_.relocalise_against_all_keyframes) {
-      s.past.push_back({T_W_C, keyframe->features});
-      s.places.add(keyframe->id, keyframe->features.descriptors);
+    if (config_.relocalise_against_all_keyframes && !coveredByPast(T_W_C)) {
+      s.places.add(static_cast<int>(s.past.size()), keyframe->features.descriptors);
+      s.past.push_back({keyframe->id, T_W_C, keyframe->features});
     }
     auto record = std::make_shared<KeyframeRecord>();
     record->timestamp_ns = timestamp_ns;
@@ -397,12 +424,18 @@ TrackingResult Tracker::track(const core::Frame& frame, const core::Isometry& in
       PlaceQuery query;
       query.min_votes = config_.relocalisation_min_votes;
       query.max_candidates = config_.relocalisation_candidates;
-      query.newest_allowed = s.keyframes.front()->id - 1;  // the recent ones were tried
+      // The recent keyframes were tried: only those kept before them are candidates.
+      query.newest_allowed = newestKeptBefore(s.past, s.keyframes.front()->id);
       if (!current_features) {
         current_features = describeFeatures(current.grey, current.depth_m, k, config_.features);
       }
-      for (const PlaceCandidate& candidate : s.places.query(
-               strongestDescriptors(*current_features, kRelocalisationQueryDescriptors), query)) {
+      const std::vector<PlaceCandidate> candidates =
+          query.newest_allowed < 0
+              ? std::vector<PlaceCandidate>{}
+              : s.places.query(
+                    strongestDescriptors(*current_features, kRelocalisationQueryDescriptors),
+                    query);
+      for (const PlaceCandidate& candidate : candidates) {
         const PastKeyframe& key = s.past[static_cast<std::size_t>(candidate.keyframe)];
         const auto pose = estimateFeaturePose(key.features, *current_features, k, config_.features);
         if (!pose) continue;

@@ -136,10 +136,54 @@ void append(const o3d::geometry::TriangleMesh& mesh, SurfaceMesh& into) {
   }
 }
 
+void append(const SurfaceMesh& mesh, SurfaceMesh& into) {
+  const auto offset = static_cast<int>(into.vertices.size());
+  into.vertices.insert(into.vertices.end(), mesh.vertices.begin(), mesh.vertices.end());
+  into.colors.insert(into.colors.end(), mesh.colors.begin(), mesh.colors.end());
+  for (const Eigen::Vector3i& t : mesh.triangles) {
+    into.triangles.push_back(t + Eigen::Vector3i::Constant(offset));
+  }
+}
+
+using BlockKey = std::array<int, 3>;
+
+BlockKey keyOf(const Eigen::Vector3i& index) { return {index.x(), index.y(), index.z()}; }
+
+// `mesh` cut into one piece per block, by the block that holds each triangle's centroid.
+std::map<BlockKey, SurfaceMesh> piecesByBlock(const o3d::geometry::TriangleMesh& mesh,
+                                              double block_m) {
+  std::map<BlockKey, SurfaceMesh> pieces;
+  std::map<BlockKey, std::unordered_map<int, int>> vertex_in_piece;
+  for (const Eigen::Vector3i& t : mesh.triangles_) {
+    const Eigen::Vector3d centroid =
+        (mesh.vertices_[t[0]] + mesh.vertices_[t[1]] + mesh.vertices_[t[2]]) / 3.0;
+    const Eigen::Vector3i block = (centroid / block_m).array().floor().cast<int>();
+    const BlockKey key = keyOf(block);
+    SurfaceMesh& piece = pieces[key];
+    auto& local = vertex_in_piece[key];
+    Eigen::Vector3i out;
+    for (int corner = 0; corner < 3; ++corner) {
+      const auto [it, added] = local.emplace(t[corner], static_cast<int>(piece.vertices.size()));
+      if (added) {
+        piece.vertices.push_back(mesh.vertices_[static_cast<std::size_t>(t[corner])]);
+        piece.colors.push_back(mesh.vertex_colors_[static_cast<std::size_t>(t[corner])]);
+      }
+      out[corner] = it->second;
+    }
+    piece.triangles.push_back(out);
+  }
+  return pieces;
+}
+
 }  // namespace
 
 SurfaceMesh TsdfMap::extractMesh() const {
-  SurfaceMesh out = released_surface_;
+  SurfaceMesh out;
+  // A block fused again since its release holds its surface itself.
+  const auto& units = volume_->tsdf.volume_units_;
+  for (const auto& [key, piece] : released_pieces_) {
+    if (units.count(Eigen::Vector3i(key[0], key[1], key[2])) == 0) append(piece, out);
+  }
   append(*volume_->tsdf.ExtractTriangleMesh(), out);
   return out;
 }
@@ -172,7 +216,18 @@ std::size_t TsdfMap::releaseBlocksBehind(const core::Isometry& T_W_C, double dis
     }
   }
   if (!released) return 0;
-  append(*released->ExtractTriangleMesh(), released_surface_);
+  // A block released again replaces its piece, unless the revisit saw less than half of
+  // what the piece holds (a glimpse): the fuller surface stays. A triangle whose centroid
+  // strays into a neighbouring block (the seam) joins that block's piece.
+  for (auto& [key, piece] : piecesByBlock(*released->ExtractTriangleMesh(), block_m)) {
+    const Eigen::Vector3i index(key[0], key[1], key[2]);
+    SurfaceMesh& kept = released_pieces_[key];
+    if (released->volume_units_.count(index) == 0) {
+      append(piece, kept);
+    } else if (2 * piece.triangles.size() >= kept.triangles.size()) {
+      kept = std::move(piece);
+    }
+  }
   return released->volume_units_.size();
 }
 
@@ -184,8 +239,12 @@ std::size_t TsdfMap::memoryBytes() const {
 }
 
 std::size_t TsdfMap::releasedSurfaceBytes() const {
-  return released_surface_.vertices.size() * 2 * sizeof(Eigen::Vector3d) +
-         released_surface_.triangles.size() * sizeof(Eigen::Vector3i);
+  std::size_t bytes = 0;
+  for (const auto& [key, piece] : released_pieces_) {
+    bytes += piece.vertices.size() * 2 * sizeof(Eigen::Vector3d) +
+             piece.triangles.size() * sizeof(Eigen::Vector3i);
+  }
+  return bytes;
 }
 
 void writePly(const SurfaceMesh& mesh, const std::filesystem::path& path) {

@@ -30,6 +30,8 @@ void readConfig(const core::ConfigSection& section, LoopConfig& config) {
   section.read("reoptimise_m", config.reoptimise_m);
   section.read("node_spacing_m", config.node_spacing_m);
   section.read("node_spacing_deg", config.node_spacing_deg);
+  section.read("cover_radius_m", config.cover_radius_m);
+  section.read("cover_angle_deg", config.cover_angle_deg);
   if (config.min_travel_m < 0.0 || config.max_descriptor_distance < 0 ||
       config.neighbours_per_descriptor < 1 || config.min_votes < 1 ||
       config.candidates_per_query < 1 || config.query_descriptors < 1 ||

@@ -112,7 +112,7 @@ void LoopGraph::add(const fusion::KeyframeRecord& record, bool depth_thinned) {
            core::rotationAngleDeg(last.T_W_C.inverse() * key.T_W_C) >= config_.node_spacing_deg;
   }
   if (node && !nodes_.empty()) {
-    const KeyframeView& last = keyframes_[static_cast<std::size_t>(nodes_.back())];
+    KeyframeView& last = keyframes_[static_cast<std::size_t>(nodes_.back())];
     GraphEdge edge;
     edge.source = static_cast<int>(nodes_.size()) - 1;
     edge.target = static_cast<int>(nodes_.size());
@@ -122,6 +122,8 @@ void LoopGraph::add(const fusion::KeyframeRecord& record, bool depth_thinned) {
                            : edgeInformation(last, key, edge.T_target_source, config_);
     odometry_.push_back(edge);
     stats_.information_ms += msSince(start);
+    // A covered node kept its depth for this edge only.
+    if (last.covered) release(last);
   }
   if (key.starts_segment) {
     const int segment = static_cast<int>(segment_start_.size());
@@ -160,9 +162,17 @@ void LoopGraph::add(const fusion::KeyframeRecord& record, bool depth_thinned) {
         fusion::strongestDescriptors(query.features, config_.query_descriptors), place);
   }
   stats_.place_lookup_ms += msSince(lookup_start);
-  const auto index_start = std::chrono::steady_clock::now();
-  index_.add(query.id, query.features.descriptors);
-  stats_.place_index_ms += msSince(index_start);
+  // A revisit still looks itself up (above) but does not stand for its place: the older
+  // keyframe there does.
+  keyframes_.back().covered = coveredByOlder(query.id);
+  if (query.covered) {
+    ++stats_.keyframes_covered;
+  } else {
+    const auto index_start = std::chrono::steady_clock::now();
+    index_.add(query.id, query.features.descriptors);
+    kept_.push_back(query.id);
+    stats_.place_index_ms += msSince(index_start);
+  }
 
   for (const fusion::PlaceCandidate& candidate : candidates) {
     const bool joins = rootOf(candidate.keyframe) != rootOf(query.id);
@@ -203,9 +213,34 @@ void LoopGraph::add(const fusion::KeyframeRecord& record, bool depth_thinned) {
     if (expired(p) && !p.accepted) ++stats_.rejected_unconfirmed;
   }
   pending_.erase(std::remove_if(pending_.begin(), pending_.end(), expired), pending_.end());
+  // The newest node keeps its depth for the odometry edge to the next node.
+  if (query.covered && nodes_.back() != query.id) release(keyframes_.back());
   ++stats_.keyframes;
   if (dirty_) optimise();
   stats_.keyframe_ms += msSince(start);
+}
+
+bool LoopGraph::coveredByOlder(int query) const {
+  if (config_.cover_radius_m <= 0.0) return false;
+  const core::Isometry& at = corrected_[static_cast<std::size_t>(query)];
+  const double travel = keyframes_[static_cast<std::size_t>(query)].travel_m;
+  for (const int kept : kept_) {
+    const KeyframeView& older = keyframes_[static_cast<std::size_t>(kept)];
+    // Kept keyframes ascend in travel: the rest are too recent to be a revisit.
+    if (travel - older.travel_m < config_.min_travel_m) break;
+    if (rootOf(kept) != rootOf(query)) continue;
+    const core::Isometry& there = corrected_[static_cast<std::size_t>(kept)];
+    if ((there.translation() - at.translation()).norm() <= config_.cover_radius_m &&
+        core::rotationAngleDeg(there.inverse() * at) <= config_.cover_angle_deg) {
+      return true;
+    }
+  }
+  return false;
+}
+
+void LoopGraph::release(KeyframeView& key) {
+  key.features = fusion::FeatureFrame{};
+  key.depth_m.release();
 }
 
 void LoopGraph::acceptLoop(const Pending& loop) {

@@ -30,6 +30,7 @@ void MapMonitor::onFrame(const MonitorFrame& frame) {
   now_.tracking_ms.add(frame.figures.tracking_ms);
   now_.integration_ms.add(frame.figures.integration_ms);
   now_.planes_ms.add(frame.figures.planes_ms);
+  now_.cpu_ms.add(frame.cpu_ms);
   now_.fps = frame.elapsed_s > 0.0 ? static_cast<double>(frame.frames_done) / frame.elapsed_s
                                    : 0.0;
   if (history_.empty() || frame.elapsed_s - history_.back().elapsed_s >= history_step_s_) {
@@ -134,6 +135,9 @@ nlohmann::json toJson(const MonitorSnapshot& s) {
         {"bitmap", optionalMean(s.bitmap_ms)},
         {"match", optionalMean(s.match_ms)}}},
       {"commit_latency_ms", optionalMean(s.commit_latency_ms)},
+      {"cpu_ms_per_frame", optionalMean(s.cpu_ms)},
+      {"cpu_s", f.cpu_s},
+      {"rss_mb", f.rss_mb},
   };
   if (!s.report.is_null()) json["report"] = s.report;
   return json;
@@ -209,6 +213,13 @@ std::string toPrometheus(const MonitorSnapshot& s) {
   for (const auto& [name, mean] : stages) {
     if (mean->seen) e.sample("tessera_stage_seconds", mean->value / 1e3, fmt::format("stage=\"{}\"", name));
   }
+  e.one("tessera_cpu_seconds_total", "counter",
+        "CPU time (user + system, every thread) since the run started", f.cpu_s);
+  if (s.cpu_ms.seen) {
+    e.one("tessera_cpu_seconds_per_frame", "gauge", "Recent mean CPU time per frame",
+          s.cpu_ms.value / 1e3);
+  }
+  e.one("tessera_resident_bytes", "gauge", "Resident memory of the process", f.rss_mb * 1e6);
   e.one("tessera_tsdf_bytes", "gauge", "Memory of the TSDF volume", count(f.figures.tsdf_bytes));
   e.one("tessera_bitmap_bytes", "gauge", "Patch bitmaps held in memory", count(f.bitmap_bytes));
   e.one("tessera_map_bytes", "gauge", "The map's size: TSDF plus bitmaps", count(f.map_bytes));

@@ -6,6 +6,7 @@
 #include <fmt/format.h>
 
 #include "internal/run_parts.h"
+#include "tessera/core/cpu_time.h"
 #include "tessera/core/error.h"
 #include "tessera/pipeline/flow_graph.h"
 
@@ -38,10 +39,16 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
   parts.store->finishRun(parts.run_id);  // a server's store first sends what its journal holds
   const double wall_s =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  const double cpu_graph_done_s = core::processCpuSeconds();
 
   RunSummary summary = internal::summariseRun(parts, options, wall_s);
   internal::exportRun(parts, options, summary);
   summary.peak_rss_mb = peakRssMb();
+  summary.cpu.stream_s = summary.stream.cpu_stream_s;
+  summary.cpu.elapsed_stream_s = summary.stream.elapsed_stream_s;
+  summary.cpu.frames = summary.stream.frames;
+  summary.cpu.end_of_stream_s = cpu_graph_done_s - parts.sink.cpuAtLastFrameS();
+  summary.cpu.finish_s = core::processCpuSeconds() - cpu_graph_done_s;
   writeReport(summary, options.out_dir / "report.json");
   if (options.monitor != nullptr) options.monitor->finish(reportJson(summary));
   return summary;

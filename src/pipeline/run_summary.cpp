@@ -23,7 +23,8 @@ namespace internal {
 namespace {
 
 StageFigures figures(const std::string& name, const StageTimer& timer) {
-  return {name, timer.count(), timer.meanMs(), timer.medianMs(), timer.aloneFps()};
+  return {
+      name, timer.count(), timer.meanMs(), timer.medianMs(), timer.aloneFps(), timer.cpuMeanMs()};
 }
 
 }  // namespace
@@ -60,6 +61,7 @@ RunSummary summariseRun(RunParts& parts, const RunOptions& options, double wall_
                     figures("integration", parts.integration.timer()),
                     figures("planes", parts.planes.timer()),
                     figures("textures", parts.bitmaps.timer()),
+                    figures("describe", summary.commits.describe),
                     figures("match", summary.commits.match),
                     figures("commit", parts.commit.timer()),
                     figures("sink", parts.sink.timer())};
@@ -75,6 +77,7 @@ nlohmann::json reportJson(const RunSummary& summary) {
                  {"fps", summary.fps},
                  {"peak_rss_mb", summary.peak_rss_mb}};
   summary.stream.addTo(report);
+  summary.cpu.addTo(report);
   summary.input.addTo(report);
   summary.tracking.addTo(report);
   summary.integration.addTo(report);
@@ -104,7 +107,8 @@ nlohmann::json reportJson(const RunSummary& summary) {
     stages[stage.name] = {{"calls", stage.calls},
                           {"mean_ms", stage.mean_ms},
                           {"median_ms", stage.median_ms},
-                          {"alone_fps", stage.alone_fps}};
+                          {"alone_fps", stage.alone_fps},
+                          {"cpu_ms_mean", stage.cpu_ms_mean}};
   }
   report["stages"] = stages;
   return report;

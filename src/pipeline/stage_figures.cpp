@@ -64,6 +64,17 @@ void StreamFigures::addTo(json& report) const {
   report["rss_growth_mb_per_1000_frames"] = orNull(rss_growth_mb_per_1000_frames);
 }
 
+void CpuFigures::addTo(json& report) const {
+  report["cpu_s_stream"] = stream_s;
+  report["cpu_ms_per_frame"] =
+      frames > 0 ? json(1e3 * stream_s / static_cast<double>(frames)) : json(nullptr);
+  report["cpu_cores_stream"] =
+      elapsed_stream_s > 0.0 ? json(stream_s / elapsed_stream_s) : json(nullptr);
+  report["cpu_s_end_of_stream"] = end_of_stream_s;
+  report["cpu_s_finish"] = finish_s;
+  report["cpu_s_total"] = stream_s + end_of_stream_s + finish_s;
+}
+
 void TrackingFigures::addTo(json& report) const {
   report["poses"] = poses;
   report["tracking_losses"] = tracking_losses;
@@ -108,10 +119,10 @@ void CommitFigures::addTo(json& report) const {
   report["commit_failures"] = commit_failures;
   report["ccv_considered"] = ccv_considered;
   report["ccv_rejection"] = orNull(ratio(ccv_removed, ccv_considered));
-  report["commit_latency_ms_p50"] = orNull(percentile(commit_latencies_ms, 0.50));
-  report["commit_latency_ms_p95"] = orNull(percentile(commit_latencies_ms, 0.95));
-  report["db_commit_ms_p50"] = orNull(percentile(store_commit_ms, 0.50));
-  report["db_commit_ms_p95"] = orNull(percentile(store_commit_ms, 0.95));
+  report["commit_latency_ms_p50"] = orNull(commit_latencies_ms.quantile(0.50));
+  report["commit_latency_ms_p95"] = orNull(commit_latencies_ms.quantile(0.95));
+  report["db_commit_ms_p50"] = orNull(store_commit_ms.quantile(0.50));
+  report["db_commit_ms_p95"] = orNull(store_commit_ms.quantile(0.95));
   report["match_ms_p50"] = match.count() > 0 ? json(match.medianMs()) : json(nullptr);
 }
 
@@ -166,6 +177,7 @@ void LoopFigures::addTo(json& report) const {
   report["loops_rejected_by_graph"] = loops.rejected_by_graph;
   report["tracking_segments"] = loops.segments;
   report["segments_joined"] = loops.segments_joined;
+  report["loop_keyframes_covered"] = loops.keyframes_covered;
   report["pose_graph_optimisations"] = loops.optimisations;
   report["pose_graph_ms"] = loops.pose_graph_ms;
   report["loop_keyframe_ms"] = loops.keyframe_ms;

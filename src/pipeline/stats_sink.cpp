@@ -7,6 +7,7 @@
 #include <spdlog/spdlog.h>
 #include <nlohmann/json.hpp>
 
+#include "tessera/core/cpu_time.h"
 #include "tessera/core/error.h"
 #include "tessera/core/trajectory.h"
 #include "tessera/pipeline/stages.h"
@@ -24,34 +25,22 @@ double residentMb() {
   return static_cast<double>(resident_pages) * static_cast<double>(sysconf(_SC_PAGESIZE)) / 1e6;
 }
 
-// How fast the resident memory grew over the second half of the run's frames (least-squares
-// slope of `rss_mb` against the frame count), MB per 1,000 frames; nothing under 200 frames.
-std::optional<double> rssGrowthMbPer1000Frames(const std::vector<double>& rss_mb) {
-  const std::size_t n = rss_mb.size();
-  if (n < 200) return std::nullopt;
-  // Least-squares slope of RSS against the frame count over the second half.
-  double sx = 0, sy = 0, sxx = 0, sxy = 0, m = 0;
-  for (std::size_t i = n / 2; i < n; ++i, ++m) {
-    const auto x = static_cast<double>(i);
-    sx += x;
-    sy += rss_mb[i];
-    sxx += x * x;
-    sxy += x * rss_mb[i];
-  }
-  const double denominator = m * sxx - sx * sx;
-  if (denominator <= 0.0) return std::nullopt;
-  return 1000.0 * (m * sxy - sx * sy) / denominator;
-}
-
 }  // namespace
 
 StreamFigures StatsSink::figures() const {
   StreamFigures figures;
   figures.frames = frames_done_;
   figures.interruptions = interruptions_;
-  figures.latency_ms_p50 = percentile(latencies_ms_, 0.50);
-  figures.latency_ms_p95 = percentile(latencies_ms_, 0.95);
-  figures.rss_growth_mb_per_1000_frames = rssGrowthMbPer1000Frames(rss_mb_);
+  figures.latency_ms_p50 = latencies_ms_.quantile(0.50);
+  figures.latency_ms_p95 = latencies_ms_.quantile(0.95);
+  // How fast the resident memory grew over the second half of the frames; nothing under 200.
+  if (frames_done_ >= 200) {
+    const std::optional<double> slope =
+        core::leastSquaresSlope(rss_mb_.points(), static_cast<double>(frames_done_ / 2));
+    if (slope) figures.rss_growth_mb_per_1000_frames = 1000.0 * *slope;
+  }
+  figures.cpu_stream_s = cpu_last_frame_s_ - cpu_start_s_;
+  figures.elapsed_stream_s = elapsed_last_frame_s_;
   return figures;
 }
 
@@ -64,7 +53,9 @@ StatsSink::StatsSink(const std::filesystem::path& out_dir, std::optional<std::si
       frames_total_(frames_total),
       on_progress_(std::move(on_progress)),
       bitmap_bytes_(std::move(bitmap_bytes)),
-      start_(std::chrono::steady_clock::now()) {
+      start_(std::chrono::steady_clock::now()),
+      cpu_start_s_(core::processCpuSeconds()),
+      cpu_last_frame_s_(cpu_start_s_) {
   for (const auto& [file, path] :
        {std::pair{&stats_, &stats_path_}, {&trajectory_, &trajectory_path_}}) {
     if (!*file) throw core::Error(fmt::format("{}: cannot be created", path->string()));
@@ -89,16 +80,22 @@ void StatsSink::process(const FusedFrame& fused) {
   }
   ++frames_done_;
   const FrameFigures& figures = fused.figures;
-  if (figures.latency_ms) latencies_ms_.push_back(*figures.latency_ms);
+  if (figures.latency_ms) latencies_ms_.add(*figures.latency_ms);
+  // The process's CPU time since the frame before: every thread's share of this frame.
+  const double cpu_s = core::processCpuSeconds();
+  const double cpu_ms = 1e3 * (cpu_s - cpu_last_frame_s_);
+  cpu_last_frame_s_ = cpu_s;
   // The map's pose of the frame: corrected against the patches when the plane stage did so.
   const std::optional<core::Isometry> pose = fused.T_W_C_planes ? fused.T_W_C_planes : fused.T_W_C;
   if (pose) estimate_[fused.frame.timestamp_ns] = *pose;
   if (fused.frame.T_W_C_gt) ground_truth_[fused.frame.timestamp_ns] = *fused.frame.T_W_C_gt;
   const std::size_t bitmap_bytes = bitmap_bytes_ ? bitmap_bytes_() : 0;
   map_bytes_ = figures.tsdf_bytes + bitmap_bytes;
-  rss_mb_.push_back(residentMb());
+  const double rss_mb = residentMb();
+  rss_mb_.add(static_cast<double>(frames_done_ - 1), rss_mb);
   const double elapsed_s =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+  elapsed_last_frame_s_ = elapsed_s;
 
   if (!write_failed_) {
     nlohmann::json line = {{"type", "frame"},
@@ -108,7 +105,8 @@ void StatsSink::process(const FusedFrame& fused) {
                            {"integrated", fused.integrated},
                            {"bitmap_bytes", bitmap_bytes},
                            {"map_bytes", map_bytes_},
-                           {"rss_mb", rss_mb_.back()},
+                           {"rss_mb", rss_mb},
+                           {"cpu_ms", cpu_ms},
                            {"textures_stored", textures_stored_}};
     figures.addTo(line);
     if (!fused.integrated) line["skip_reason"] = fused.skip_reason;
@@ -134,6 +132,9 @@ void StatsSink::process(const FusedFrame& fused) {
     frame.figures = figures;
     frame.bitmap_bytes = bitmap_bytes;
     frame.map_bytes = map_bytes_;
+    frame.cpu_ms = cpu_ms;
+    frame.cpu_s = cpu_s - cpu_start_s_;
+    frame.rss_mb = rss_mb;
     monitor_->onFrame(frame);
   }
   if (on_progress_) {

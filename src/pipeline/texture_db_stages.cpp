@@ -5,6 +5,7 @@
 #include <spdlog/spdlog.h>
 #include <opencv2/core.hpp>
 
+#include "tessera/core/cpu_time.h"
 #include "tessera/core/error.h"
 
 namespace tessera::pipeline {
@@ -26,6 +27,13 @@ cv::Mat validTexels(const texture::PatchBitmap& bitmap) {
 }  // namespace
 
 DescribedPatch DescribeStage::process(const PatchJob& job) const {
+  const double cpu_start_s = core::threadCpuSeconds();
+  DescribedPatch described = describe(job);
+  described.cpu_ms = 1e3 * (core::threadCpuSeconds() - cpu_start_s);
+  return described;
+}
+
+DescribedPatch DescribeStage::describe(const PatchJob& job) const {
   DescribedPatch described;
   described.sequence = job.sequence;
   described.patch_id = job.retired ? *job.retired : job.patch.id;
@@ -93,6 +101,8 @@ CommitRecord CommitStage::process(DescribedPatch described) {
   figures.bitmap_ms = bitmap.build_ms;
   figures.describe_ms = described.describe_ms;
   figures.pattern_ms = described.pattern_ms;
+  figures_.describe.add(figures.bitmap_ms + figures.describe_ms + figures.pattern_ms,
+                        described.cpu_ms);
   // Until it is committed, the map shows the patch's own bitmap.
   shown_[bitmap.id] = reuse::ShownPatch{bitmap.grid.texels(), {}};
   if (!described.description) return record;
@@ -116,7 +126,7 @@ CommitRecord CommitStage::process(DescribedPatch described) {
   const auto commit_start = std::chrono::steady_clock::now();
   try {
     ids = store_.commit(commit);
-    figures_.store_commit_ms.push_back(msSince(commit_start));
+    figures_.store_commit_ms.add(msSince(commit_start));
   } catch (const core::Error& e) {
     // The map keeps the patch's own bitmap; the database keeps every earlier commit.
     spdlog::error("patch {} version {}: not committed: {}", bitmap.id, bitmap.version, e.what());
@@ -140,7 +150,7 @@ CommitRecord CommitStage::process(DescribedPatch described) {
   record.instance = commit.instances.front();
   record.overlays.assign(commit.instances.begin() + 1, commit.instances.end());
   figures.commit_latency_ms = msSince(described.finalized_at);
-  figures_.commit_latencies_ms.push_back(figures.commit_latency_ms);
+  figures_.commit_latencies_ms.add(figures.commit_latency_ms);
   return record;
 }
 
@@ -151,7 +161,7 @@ void CommitStage::retire(int patch_id) {
   const auto commit_start = std::chrono::steady_clock::now();
   try {
     store_.commit(commit);
-    figures_.store_commit_ms.push_back(msSince(commit_start));
+    figures_.store_commit_ms.add(msSince(commit_start));
   } catch (const core::Error& e) {
     // The database keeps an instance of a patch the map no longer has; the map is right.
     spdlog::error("patch {} (merged into another): its instances stay: {}", patch_id, e.what());

@@ -103,6 +103,35 @@ TEST(TsdfMap, BlocksFarBehindTheCameraAreFreed) {
   EXPECT_LE(map.extractMesh().triangles.size(), triangles);
 }
 
+// A robot walking past the same wall lap after lap: the wall is fused, left behind and
+// released, then fused again on the next lap. What the map keeps of it stays one lap's.
+TEST(TsdfMap, AWallReleasedLapAfterLapIsKeptOnce) {
+  TsdfMap map(TsdfConfig{});
+  const core::Intrinsics k = test::kinectIntrinsics();
+  const Eigen::Vector3d n(0, 0, -1);
+  const double d = n.dot(Eigen::Vector3d(0, 0, 1.5));
+  core::Isometry past = core::Isometry::Identity();
+  past.translation() = Eigen::Vector3d(0, 0, 4.0);
+  std::size_t pieces = 0, bytes = 0, triangles = 0;
+  for (int lap = 0; lap < 4; ++lap) {
+    SCOPED_TRACE(lap);
+    const core::Isometry T_W_C = core::Isometry::Identity();
+    map.integrate(test::renderPlane(k, T_W_C, n, d), T_W_C);
+    ASSERT_GT(map.releaseBlocksBehind(past, 0.5), 0u);
+    EXPECT_EQ(map.blockCount(), 0u);
+    if (lap == 0) {
+      pieces = map.releasedPieces();
+      bytes = map.releasedSurfaceBytes();
+      triangles = map.extractMesh().triangles.size();
+      ASSERT_GT(triangles, 1000u);
+    }
+    // The same wall: the same pieces, not one more copy a lap.
+    EXPECT_EQ(map.releasedPieces(), pieces);
+    EXPECT_EQ(map.releasedSurfaceBytes(), bytes);
+    EXPECT_EQ(map.extractMesh().triangles.size(), triangles);
+  }
+}
+
 TEST(TsdfMap, DepthOutsideTheConfiguredRangeIsIgnored) {
   TsdfConfig config;
   config.max_depth_m = 1.0;  // the plane at 1.5 m is beyond it

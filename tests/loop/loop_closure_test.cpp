@@ -237,5 +237,52 @@ TEST(LoopGraph, TwoIdenticalRoomsCloseNoLoop) {
   EXPECT_TRUE(passes.graph.loops().empty());
 }
 
+// Ten laps of a 2 m circle, 48 keyframes a lap, tracked with a little drift: after the first
+// lap every keyframe revisits a kept one's place, so the keyframes kept with their features and
+// depth (and indexed) stay one lap's, however many laps the walk makes.
+TEST(LoopGraph, KeepsOneLapOfKeyframesOverTenLapsOfTheSamePlaces) {
+  LoopConfig config;
+  config.min_travel_m = 4.0;
+  LoopGraph graph(config);
+  const int per_lap = 48, laps = 10;
+  const cv::Mat depth(16, 16, CV_32F, cv::Scalar(1.5f));
+  for (int i = 0; i < per_lap * laps; ++i) {
+    const double angle = 2.0 * M_PI * i / per_lap;
+    // Looking along the circle; drift of 1 mm a keyframe, up to 5 cm a lap.
+    const core::Isometry T_W_C =
+        core::Isometry(Eigen::Translation3d(2.0 * std::cos(angle) + 0.001 * (i % per_lap),
+                                            2.0 * std::sin(angle), 1.5)) *
+        Eigen::AngleAxisd(angle, Eigen::Vector3d::UnitZ());
+    fusion::KeyframeRecord record;
+    record.timestamp_ns = static_cast<std::int64_t>(i) * 100'000'000;
+    record.T_W_C = T_W_C;
+    record.depth_m = depth;
+    record.intrinsics = core::Intrinsics{16, 16, 16.0, 16.0, 7.5, 7.5};
+    graph.add(record);
+  }
+  const std::size_t keyframes = graph.keyframes().size();
+  EXPECT_EQ(keyframes, static_cast<std::size_t>(per_lap * laps));
+  // The first lap, and the first 4 m of the second (the travel bound: min_travel_m).
+  EXPECT_LE(graph.keptKeyframes(), static_cast<std::size_t>(per_lap + per_lap / 2));
+  EXPECT_EQ(graph.stats().keyframes_covered + graph.keptKeyframes(), keyframes);
+  // Covered keyframes let their depth go, all but the newest node.
+  std::size_t holding_depth = 0;
+  for (const KeyframeView& key : graph.keyframes()) holding_depth += key.depth_m.empty() ? 0 : 1;
+  EXPECT_LE(holding_depth, graph.keptKeyframes() + 1);
+
+  // With covering off, every keyframe is kept.
+  config.cover_radius_m = 0.0;
+  LoopGraph keep_all(config);
+  for (const KeyframeView& key : graph.keyframes()) {
+    fusion::KeyframeRecord record;
+    record.timestamp_ns = key.timestamp_ns;
+    record.T_W_C = key.T_W_C;
+    record.depth_m = depth;
+    record.intrinsics = core::Intrinsics{16, 16, 16.0, 16.0, 7.5, 7.5};
+    keep_all.add(record);
+  }
+  EXPECT_EQ(keep_all.keptKeyframes(), keyframes);
+}
+
 }  // namespace
 }  // namespace tessera::loop

@@ -203,7 +203,12 @@ TEST(Pipeline, RunsEveryGoodFrameAndWritesTheOutputs) {
                           "patch_psnr_min",
                           "ccv_rejection",
                           "commit_latency_ms_p50",
-                          "commit_latency_ms_p95"}) {
+                          "commit_latency_ms_p95",
+                          "cpu_s_stream",
+                          "cpu_ms_per_frame",
+                          "cpu_s_end_of_stream",
+                          "cpu_s_finish",
+                          "cpu_s_total"}) {
     EXPECT_TRUE(report.contains(key)) << key;
   }
   EXPECT_EQ(report["frames"], 7);
@@ -214,6 +219,13 @@ TEST(Pipeline, RunsEveryGoodFrameAndWritesTheOutputs) {
   EXPECT_TRUE(fs::is_regular_file(out / "textures.db"));
   EXPECT_GT(report["peak_rss_mb"].get<double>(), 0.0);
   EXPECT_EQ(report["stages"]["integration"]["calls"], 7);
+  // The CPU time's parts add up, and the stream's is the process's, not one thread's.
+  EXPECT_GT(report["cpu_s_stream"].get<double>(), 0.0);
+  EXPECT_NEAR(report["cpu_s_total"].get<double>(),
+              report["cpu_s_stream"].get<double>() + report["cpu_s_end_of_stream"].get<double>() +
+                  report["cpu_s_finish"].get<double>(),
+              1e-9);
+  EXPECT_GT(report["stages"]["tracking"]["cpu_ms_mean"].get<double>(), 0.0);
 }
 
 TEST(Pipeline, EveryOtherFrameIsIntegratedAndEveryFrameIsPosed) {

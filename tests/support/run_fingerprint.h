@@ -52,11 +52,30 @@ inline std::string runFingerprint(const std::filesystem::path& run_dir) {
   for (const std::string& line : instances) out << line << '\n';
   std::ifstream report_file(run_dir / "report.json");
   nlohmann::json report = nlohmann::json::parse(report_file);
-  for (const char* timing :
-       {"wall_s", "fps", "peak_rss_mb", "rss_growth_mb_per_1000_frames", "latency_ms_p50",
-        "latency_ms_p95", "commit_latency_ms_p50", "commit_latency_ms_p95", "db_commit_ms_p50",
-        "db_commit_ms_p95", "match_ms_p50", "bitmap_ms_per_m2", "pose_graph_ms", "loop_keyframe_ms",
-        "loop_wait_s", "stages", "db", "source"}) {
+  for (const char* timing : {"wall_s",
+                             "fps",
+                             "peak_rss_mb",
+                             "rss_growth_mb_per_1000_frames",
+                             "latency_ms_p50",
+                             "latency_ms_p95",
+                             "commit_latency_ms_p50",
+                             "commit_latency_ms_p95",
+                             "db_commit_ms_p50",
+                             "db_commit_ms_p95",
+                             "match_ms_p50",
+                             "bitmap_ms_per_m2",
+                             "pose_graph_ms",
+                             "loop_keyframe_ms",
+                             "loop_wait_s",
+                             "stages",
+                             "db",
+                             "source",
+                             "cpu_s_stream",
+                             "cpu_ms_per_frame",
+                             "cpu_cores_stream",
+                             "cpu_s_end_of_stream",
+                             "cpu_s_finish",
+                             "cpu_s_total"}) {
     report.erase(timing);
   }
   out << report.dump(1) << '\n';

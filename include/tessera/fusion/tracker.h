@@ -50,6 +50,11 @@ struct TrackerConfig {
   bool relocalise_against_all_keyframes = true;
   int relocalisation_candidates = 3;  // the most voted keyframes tried, in turn
   int relocalisation_min_votes = 12;  // descriptors near a keyframe's for it to be one
+  // A new keyframe within this distance and turn (tracked poses) of an older one kept for that
+  // lookup revisits its place and is not kept for it: memory grows with the places seen, not
+  // with the time spent in them (0: keep every keyframe).
+  double relocalisation_cover_radius_m = 0.3;
+  double relocalisation_cover_angle_deg = 20.0;
   FeaturePoseConfig features;  // config section tracker_features
 };
 

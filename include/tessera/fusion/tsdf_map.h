@@ -1,8 +1,10 @@
 #pragma once
 // The fused volumetric map. Open3D's ScalableTSDFVolume does the work behind this interface;
 // no Open3D header leaves the fusion module.
+#include <array>
 #include <cstddef>
 #include <filesystem>
+#include <map>
 #include <memory>
 #include <vector>
 
@@ -70,7 +72,11 @@ class TsdfMap {
 
   // Frees the blocks far behind the camera at T_W_C: centre farther than distance_m from it and
   // behind its image plane (so nothing the camera looks at is freed and re-allocated). Their
-  // surface is kept as a mesh, which extractMesh() includes. Returns how many were freed.
+  // surface is kept as a mesh piece per block, which extractMesh() includes unless the block
+  // was fused again on a revisit (the volume holds its surface then). A block released again
+  // replaces its piece, unless it saw less than half of it: the pieces grow with the area
+  // mapped, not with the laps.
+  // Returns how many were freed.
   std::size_t releaseBlocksBehind(const core::Isometry& T_W_C, double distance_m);
 
   const TsdfConfig& config() const { return config_; }
@@ -78,6 +84,7 @@ class TsdfMap {
   // Bytes held by allocated voxel blocks and the surface of released ones.
   std::size_t memoryBytes() const;
   std::size_t releasedSurfaceBytes() const;
+  std::size_t releasedPieces() const { return released_pieces_.size(); }
   std::size_t blockCount() const;
 
   // Caps the OpenMP threads Open3D uses inside integrate() on the calling thread.
@@ -87,7 +94,8 @@ class TsdfMap {
   struct Volume;
   TsdfConfig config_;
   std::unique_ptr<Volume> volume_;
-  SurfaceMesh released_surface_;  // of the blocks released so far
+  // The surface of the released blocks, by block index (Open3D's key of the block).
+  std::map<std::array<int, 3>, SurfaceMesh> released_pieces_;
   int thread_cap_ = 0;            // 0: leave OpenMP's default
 };
 

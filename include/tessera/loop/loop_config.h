@@ -58,6 +58,13 @@ struct LoopConfig {
   // Once closed, a further revisit re-optimises the graph only when the pose it implies for
   // its query differs from the corrected one by more than this (the graph already agrees).
   double reoptimise_m = 0.02;
+  // A keyframe within cover_radius_m and cover_angle_deg (corrected poses) of an older kept
+  // keyframe of its segment, at least min_travel_m of path behind, revisits that place: it is
+  // still a query and a pose, but its features and depth leave memory and it is not indexed,
+  // so that memory grows with the places seen rather than with the time spent in them
+  // (0: keep every keyframe).
+  double cover_radius_m = 0.3;
+  double cover_angle_deg = 20.0;
   fusion::FeaturePoseConfig features;  // verification's PnP (config section loop_features)
 };
 

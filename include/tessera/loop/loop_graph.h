@@ -48,6 +48,7 @@ struct LoopStats {
   std::size_t loop_closures = 0;         // loop edges in the optimised graph
   std::size_t segments = 0;              // tracking segments (1 + restarts)
   std::size_t segments_joined = 0;       // joins of a segment to an earlier one
+  std::size_t keyframes_covered = 0;     // revisits of a kept keyframe's place, not kept
   std::size_t optimisations = 0;
   double pose_graph_ms = 0.0;  // all optimisations together
   double keyframe_ms = 0.0;    // all keyframes' work together, optimisations included
@@ -85,6 +86,8 @@ class LoopGraph {
   // Per keyframe, its pose after the last optimisation.
   const std::vector<core::Isometry>& correctedPoses() const { return corrected_; }
   const std::vector<KeyframeView>& keyframes() const { return keyframes_; }
+  // Keyframes kept with their features and depth, in the place index: not covered.
+  std::size_t keptKeyframes() const { return kept_.size(); }
 
  private:
   // A verified revisit within the confirmation window.
@@ -109,6 +112,10 @@ class LoopGraph {
   // The newest keyframe of a segment not joined to `query`'s, or -1.
   int newestOfAnotherSegment(int query) const;
   void acceptLoop(const Pending& loop);
+  // Whether `query` lies where an older kept keyframe of its segment already stands.
+  bool coveredByOlder(int query) const;
+  // Lets a covered keyframe's features and depth go.
+  void release(KeyframeView& key);
   void optimise();
 
   LoopConfig config_;
@@ -122,6 +129,7 @@ class LoopGraph {
   std::vector<GraphEdge> odometry_;
   std::vector<LoopEdge> loops_;
   std::vector<Pending> pending_;
+  std::vector<int> kept_;            // keyframes not covered (indexed), ascending
   std::vector<int> segment_of_;      // per keyframe
   std::vector<int> segment_start_;   // per segment, its first keyframe
   std::vector<int> segment_parent_;  // per segment, union-find parent

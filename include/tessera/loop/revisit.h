@@ -30,6 +30,9 @@ struct KeyframeView {
   cv::Mat depth_m;              // every dense_stride-th pixel, metres, NaN where missing
   double travel_m = 0.0;        // camera path length from the first keyframe, as tracked
   bool starts_segment = false;
+  // A revisit of an older keyframe's place (LoopConfig::cover_radius_m): once it is no longer
+  // needed, its features and depth are released and it is never a candidate.
+  bool covered = false;
 };
 
 struct Revisit {

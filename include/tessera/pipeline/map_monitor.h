@@ -28,6 +28,9 @@ struct MonitorFrame {
   std::size_t frames_dropped = 0;  // live sources: frames the busy pipeline never read
   FrameFigures figures;            // the frame's own, as its stats.jsonl line gives them
   std::size_t bitmap_bytes = 0, map_bytes = 0;
+  double cpu_ms = 0.0;  // the process's CPU time since the frame before (every thread)
+  double cpu_s = 0.0;   // the process's CPU time since the run started
+  double rss_mb = 0.0;  // resident memory
 };
 
 // One patch through matching and commit, with the run's totals after it.
@@ -56,6 +59,7 @@ struct MonitorSnapshot {
   std::size_t ccv_considered = 0, ccv_removed = 0;    // over every commit so far
   RecentMean tracking_ms, integration_ms, planes_ms;  // per frame
   RecentMean bitmap_ms, match_ms, commit_latency_ms;  // per patch
+  RecentMean cpu_ms;                                  // per frame, every thread
   double fps = 0.0;                                   // frames over elapsed time
   nlohmann::json report;                              // report.json once finished
 };

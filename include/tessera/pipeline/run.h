@@ -42,6 +42,7 @@ struct RunSummary {
   double fps = 0.0;
   double peak_rss_mb = 0.0;
   StreamFigures stream;
+  CpuFigures cpu;
   SourceFigures input;
   TrackingFigures tracking;
   IntegrationFigures integration;

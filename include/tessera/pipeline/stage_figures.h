@@ -10,6 +10,7 @@
 #include <nlohmann/json.hpp>
 
 #include "tessera/core/frame_source.h"
+#include "tessera/core/quantiles.h"
 #include "tessera/core/trajectory.h"
 #include "tessera/db/texture_store.h"
 #include "tessera/loop/loop_graph.h"
@@ -64,6 +65,18 @@ struct StreamFigures {
   // How fast the resident memory grew over the second half of the frames (least squares),
   // MB per 1,000 frames; nothing for runs under 200 frames.
   std::optional<double> rss_growth_mb_per_1000_frames;
+  double cpu_stream_s = 0.0;      // process CPU time from the start to the last frame
+  double elapsed_stream_s = 0.0;  // wall time from the start to the last frame
+  void addTo(nlohmann::json& report) const;
+};
+
+// The process's CPU time (user + system, every thread), split where a robot needs it: while
+// frames stream, then the end of the stream (the patches left finalized, textured and
+// committed), then the finish (loop closure's last solve, the TSDF correction, the export).
+struct CpuFigures {
+  double stream_s = 0.0, end_of_stream_s = 0.0, finish_s = 0.0;
+  double elapsed_stream_s = 0.0;
+  std::size_t frames = 0;
   void addTo(nlohmann::json& report) const;
 };
 
@@ -119,9 +132,10 @@ struct CommitFigures {
   std::size_t commit_failures = 0;
   std::size_t retirements = 0;  // patches merged into another: their instances removed
   std::size_t ccv_considered = 0, ccv_removed = 0;
-  std::vector<double> commit_latencies_ms;  // finalization to commit, per committed patch
-  std::vector<double> store_commit_ms;      // TextureStore::commit calls alone
-  StageTimer match;                         // matching and layer planning, per patch
+  core::Quantiles commit_latencies_ms;  // finalization to commit, per committed patch
+  core::Quantiles store_commit_ms;      // TextureStore::commit calls alone
+  StageTimer match;                     // matching and layer planning, per patch
+  StageTimer describe;                  // bitmap, description and pattern, per patch
   void addTo(nlohmann::json& report) const;
 };
 
@@ -167,6 +181,7 @@ struct StageFigures {
   double mean_ms = 0.0;
   double median_ms = 0.0;
   double alone_fps = 0.0;
+  double cpu_ms_mean = 0.0;  // on the thread that ran the call (StageTimer)
 };
 
 }  // namespace tessera::pipeline

@@ -14,6 +14,7 @@
 #include <string>
 
 #include "tessera/core/frame_source.h"
+#include "tessera/core/thinned_series.h"
 #include "tessera/core/trajectory.h"
 #include "tessera/fusion/reintegration_log.h"
 #include "tessera/fusion/tracker.h"
@@ -303,6 +304,8 @@ class StatsSink {
   const core::Trajectory& estimate() const { return estimate_; }
   const core::Trajectory& groundTruth() const { return ground_truth_; }
   const StageTimer& timer() const { return timer_; }
+  // The process's CPU time (core::processCpuSeconds) when the last frame was reported.
+  double cpuAtLastFrameS() const { return cpu_last_frame_s_; }
 
  private:
   std::filesystem::path stats_path_;
@@ -320,8 +323,10 @@ class StatsSink {
   std::size_t interruptions_ = 0;
   core::Trajectory estimate_;
   core::Trajectory ground_truth_;
-  std::vector<double> latencies_ms_;
-  std::vector<double> rss_mb_;  // resident memory after each frame
+  core::Quantiles latencies_ms_;
+  core::ThinnedSeries rss_mb_;                         // resident memory (MB) against frames done
+  double cpu_start_s_ = 0.0, cpu_last_frame_s_ = 0.0;  // process CPU time
+  double elapsed_last_frame_s_ = 0.0;
   bool write_failed_ = false;
   std::size_t textures_stored_ = 0;
   struct BatchCounts {

@@ -54,6 +54,7 @@ struct DescribedPatch {
   std::optional<pattern::Pattern> pattern;  // in bitmap texels; looked for when enabled
   double describe_ms = 0.0;                 // CCV and features of the new bitmap
   double pattern_ms = 0.0;                  // the autocorrelation analysis
+  double cpu_ms = 0.0;                      // all of it, on the describing thread
   SteadyTime finalized_at;
 
   struct Batch {
@@ -73,6 +74,8 @@ class DescribeStage {
   DescribedPatch process(const PatchJob& job) const;
 
  private:
+  DescribedPatch describe(const PatchJob& job) const;
+
   texture::BitmapConfig bitmaps_;
   match::MatchConfig match_;
   pattern::PatternStageConfig patterns_;
