@@ -14,6 +14,9 @@
 #include "tessera/drivers/openni2/openni2_source.h"
 #include "tessera/drivers/synthetic/renderer.h"
 #include "tessera/drivers/synthetic/scene_ground_truth.h"
+#ifdef TESSERA_HAVE_ROS1
+#include "tessera/drivers/ros1/bag_writer.h"
+#endif
 
 namespace tessera::cli {
 
@@ -33,6 +36,50 @@ void addCodecOptions(CLI::App* record, RecordArguments& args) {
       ->capture_default_str();
 }
 
+struct CopyResult {
+  std::size_t frames = 0;  // written
+  std::size_t bad = 0;     // skipped
+  std::string end_problem;
+  double seconds = 0.0;
+};
+
+// Reads `source` to its end (or --max-frames), handing every good frame to `write`, with a
+// progress line.
+template <typename Write>
+CopyResult copyFrames(core::FrameSource& source, std::size_t max_frames, Write write) {
+  CopyResult copied;
+  ProgressLine progress;
+  const auto start = std::chrono::steady_clock::now();
+  const auto elapsed = [&] {
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  };
+  while (max_frames == 0 || copied.frames < max_frames) {
+    core::ReadResult result = source.read();
+    if (result.status == core::ReadStatus::kEndOfData) {
+      copied.end_problem = result.problem;
+      break;
+    }
+    if (result.status == core::ReadStatus::kBadFrame) {
+      ++copied.bad;
+      spdlog::warn("{}: skipped {}", source.name(), result.problem);
+      continue;
+    }
+    write(result.frame);
+    ++copied.frames;
+    progress.update({copied.frames, source.frameCount(), elapsed(), 0, std::nullopt});
+  }
+  progress.finish();
+  copied.seconds = elapsed();
+  if (copied.frames == 0) throw core::SourceError(source.name() + ": no frame could be read");
+  if (!copied.end_problem.empty()) spdlog::error("{}", copied.end_problem);
+  return copied;
+}
+
+void logSpeed(const CopyResult& copied) {
+  spdlog::info("{:.1f} s, {:.1f} frames/s", copied.seconds,
+               static_cast<double>(copied.frames) / copied.seconds);
+}
+
 // Writes every good frame of `source` to args.output and the sidecar (with `extra` keys).
 int recordFrames(core::FrameSource& source, const RecordArguments& args,
                  const nlohmann::json& extra) {
@@ -45,55 +92,68 @@ int recordFrames(core::FrameSource& source, const RecordArguments& args,
 
   std::unique_ptr<drivers::oni::OniWriter> writer;  // opened at the first frame (its size)
   drivers::oni::GroundTruthFile ground_truth;
-  ProgressLine progress;
-  const auto start = std::chrono::steady_clock::now();
-  std::size_t bad = 0;
-  std::string end_problem;
-  for (;;) {
-    if (args.source_args.max_frames > 0 && writer &&
-        writer->framesWritten() >= args.source_args.max_frames) {
-      break;
-    }
-    core::ReadResult result = source.read();
-    if (result.status == core::ReadStatus::kEndOfData) {
-      end_problem = result.problem;
-      break;
-    }
-    if (result.status == core::ReadStatus::kBadFrame) {
-      ++bad;
-      spdlog::warn("{}: skipped {}", source.name(), result.problem);
-      continue;
-    }
-    const core::Frame& frame = result.frame;
-    if (!writer) {
-      options.with_colour = !frame.rgb.empty();
-      writer = std::make_unique<drivers::oni::OniWriter>(args.output, frame.intrinsics,
-                                                         frame.rgb.size(), options);
-      ground_truth.setIntrinsics(frame.intrinsics);
-      if (frame.colour_camera) ground_truth.setColourCamera(*frame.colour_camera);
-    }
-    writer->write(frame);
-    ground_truth.addFrame(frame);
-    const double elapsed =
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    progress.update({writer->framesWritten(), source.frameCount(), elapsed, 0, std::nullopt});
-  }
-  progress.finish();
-  if (!writer) throw core::SourceError(source.name() + ": no frame could be read");
+  const CopyResult copied =
+      copyFrames(source, args.source_args.max_frames, [&](const core::Frame& frame) {
+        if (!writer) {
+          options.with_colour = !frame.rgb.empty();
+          writer = std::make_unique<drivers::oni::OniWriter>(args.output, frame.intrinsics,
+                                                             frame.rgb.size(), options);
+          ground_truth.setIntrinsics(frame.intrinsics);
+          if (frame.colour_camera) ground_truth.setColourCamera(*frame.colour_camera);
+        }
+        writer->write(frame);
+        ground_truth.addFrame(frame);
+      });
   writer->close();
   for (const auto& [key, value] : extra.items()) ground_truth.extra()[key] = value;
   const auto sidecar = drivers::oni::groundTruthPath(args.output);
   ground_truth.write(sidecar);
-  if (!end_problem.empty()) spdlog::error("{}", end_problem);
   spdlog::info(
       "wrote {} frames ({} bad skipped, {} with ground-truth pose) to {} ({:.1f} MB) and {}",
-      writer->framesWritten(), bad, ground_truth.framesWithPose(), args.output,
+      writer->framesWritten(), copied.bad, ground_truth.framesWithPose(), args.output,
       static_cast<double>(std::filesystem::file_size(args.output)) / 1e6, sidecar.string());
-  const double seconds =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  spdlog::info("{:.1f} s, {:.1f} frames/s", seconds,
-               static_cast<double>(writer->framesWritten()) / seconds);
+  logSpeed(copied);
   return 0;
+}
+
+// Writes every good frame of `source` to the ROS 1 bag args.output, ground truth on /tf.
+int recordBag(core::FrameSource& source, const RecordArguments& args) {
+#ifdef TESSERA_HAVE_ROS1
+  drivers::ros1::BagWriterOptions options;
+  if (!args.source_args.topic_set.empty()) {
+    options.topics = *drivers::ros1::namedTopics(args.source_args.topic_set);
+  }
+  drivers::ros1::remapTopics(options.topics, args.source_args.topic_remaps);
+  options.depth_encoding = args.depth_encoding;
+  options.colour_encoding = args.colour_encoding;
+  options.world_frame = args.source_args.world_frame;
+  if (!args.source_args.camera_frame.empty()) options.depth_frame = args.source_args.camera_frame;
+  options.lz4 = args.bag_lz4;
+  drivers::ros1::BagWriter writer(args.output, options);
+  std::size_t with_pose = 0;
+  const CopyResult copied =
+      copyFrames(source, args.source_args.max_frames, [&](const core::Frame& frame) {
+        writer.write(frame);
+        if (frame.T_W_C_gt) ++with_pose;
+      });
+  writer.close();
+  spdlog::info("wrote {} frames ({} bad skipped, {} with ground truth on {}) to {} ({:.1f} MB)",
+               writer.framesWritten(), copied.bad, with_pose,
+               options.topics.pose.empty() ? "no topic" : options.topics.pose, args.output,
+               static_cast<double>(std::filesystem::file_size(args.output)) / 1e6);
+  logSpeed(copied);
+  return 0;
+#else
+  (void)source;
+  throw core::ConfigError(fmt::format(
+      "{}: this tessera was built without ROS 1; install it with scripts/setup.sh and build "
+      "again to write bags",
+      args.output));
+#endif
+}
+
+bool isBagOutput(const RecordArguments& args) {
+  return std::filesystem::path(args.output).extension() == ".bag";
 }
 
 // A live device records itself through OpenNI2's Recorder while this reads it, until
@@ -135,22 +195,47 @@ int recordLive(const RecordArguments& args) {
 
 CLI::App* addRecordCommand(CLI::App& app, RecordArguments& args) {
   CLI::App* record = app.add_subcommand(
-      "record", "Convert SOURCE into an OpenNI2 recording OUT.oni (+ OUT.gt.json)");
+      "record",
+      "Convert SOURCE into an OpenNI2 recording OUT.oni (+ OUT.gt.json) or a ROS 1 bag OUT.bag");
   record
       ->add_option("SOURCE", args.source,
                    "Dataset folder, .oni recording or synthetic scene (.yaml) to convert, or a "
                    "live device (openni2://[URI]) to record through OpenNI2's Recorder until "
                    "--max-frames or Ctrl-C")
       ->required();
-  record->add_option("OUT", args.output, "The .oni file to write")->required();
+  record
+      ->add_option("OUT", args.output,
+                   "The .oni file to write, or a ROS 1 bag (.bag): depth, colour and their "
+                   "camera_info on the --topics set's names (default openni), ground truth on /tf")
+      ->required();
   addCodecOptions(record, args);
+  record
+      ->add_option("--depth-encoding", args.depth_encoding,
+                   ".bag: depth as 16UC1 millimetres or 32FC1 metres")
+      ->check(CLI::IsMember({"16UC1", "32FC1"}))
+      ->capture_default_str();
+  record
+      ->add_option("--colour-encoding", args.colour_encoding,
+                   ".bag: colour as rgb8, bgr8, bayer_rggb8, bayer_bggr8, bayer_gbrg8, "
+                   "bayer_grbg8, yuv422 (UYVY) or yuv422_yuy2")
+      ->check(CLI::IsMember({"rgb8", "bgr8", "bayer_rggb8", "bayer_bggr8", "bayer_gbrg8",
+                             "bayer_grbg8", "yuv422", "yuv422_yuy2"}))
+      ->capture_default_str();
+  record->add_flag("--lz4", args.bag_lz4, ".bag: compress the bag's chunks with LZ4");
   addSourceOptions(*record, args.source_args);
   return record;
 }
 
 int recordCommand(const RecordArguments& args) {
   try {
-    if (drivers::openni2::parseOpenNi2Uri(args.source)) return recordLive(args);
+    if (drivers::openni2::parseOpenNi2Uri(args.source)) {
+      if (isBagOutput(args)) {
+        throw core::ConfigError(fmt::format(
+            "{}: a live OpenNI2 device records through OpenNI2's Recorder, to .oni only",
+            args.output));
+      }
+      return recordLive(args);
+    }
     auto source = openSource(args.source, args.source_args);
     if (source->isLive()) {
       throw core::ConfigError(fmt::format(
@@ -158,6 +243,7 @@ int recordCommand(const RecordArguments& args) {
           "open a Kinect v1 through OpenNI2 to record it",
           args.source));
     }
+    if (isBagOutput(args)) return recordBag(*source, args);
     return recordFrames(*source, args, nlohmann::json::object());
   } catch (const core::Error& e) {
     spdlog::error("{}", e.what());

@@ -1,6 +1,6 @@
 #pragma once
 // `tessera record SOURCE OUT.oni`: converts any source into an OpenNI2 recording plus its
-// ground-truth sidecar OUT.gt.json.
+// ground-truth sidecar OUT.gt.json, or into a ROS 1 bag (OUT.bag).
 #include <string>
 
 #include <CLI/CLI.hpp>
@@ -15,6 +15,9 @@ struct RecordArguments {
   std::string depth_codec = "16zT";
   std::string colour_codec = "jpeg";
   int jpeg_quality = 90;
+  std::string depth_encoding = "16UC1";  // .bag output
+  std::string colour_encoding = "rgb8";  // .bag output
+  bool bag_lz4 = false;                  // .bag output: LZ4 chunks
   std::string sensor;  // synth: a named sensor profile instead of the scene's
   SourceArguments source_args;
 };

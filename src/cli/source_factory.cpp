@@ -14,6 +14,9 @@
 #include "tessera/drivers/synthetic/renderer.h"
 #include "tessera/drivers/v4l2/camera_calibration.h"
 #include "tessera/drivers/v4l2/v4l2_source.h"
+#ifdef TESSERA_HAVE_ROS1
+#include "tessera/drivers/ros1/bag_source.h"
+#endif
 
 namespace tessera::cli {
 
@@ -22,6 +25,64 @@ namespace fs = std::filesystem;
 namespace {
 // The synthetic office (rendered by the build), else the committed real TUM frames.
 constexpr const char* kDefaultRecordings[] = {"office.oni", "tum_fr1_rpy_20.oni"};
+}  // namespace
+
+namespace {
+
+void addRosOptions(CLI::App& command, SourceArguments& args) {
+  command
+      .add_option("--topics", args.topic_set,
+                  "ROS bags: the topic names of openni (openni2_launch and freenect_launch with "
+                  "depth registration) or tum (the TUM RGB-D bags); default: the first set the "
+                  "bag has")
+      ->check(CLI::IsMember({"openni", "tum"}));
+  command.add_option("--topic", args.topic_remaps,
+                     "ROS bags: one topic named in ROS's remapping syntax ROLE:=TOPIC, ROLE one "
+                     "of depth, colour, depth_info, colour_info, pose (tf or PoseStamped ground "
+                     "truth); may be repeated");
+  command
+      .add_option("--world-frame", args.world_frame,
+                  "ROS bags: the tf frame the ground-truth poses are given in")
+      ->capture_default_str();
+  command.add_option("--camera-frame", args.camera_frame,
+                     "ROS bags: the tf frame whose pose is the camera's (default: the depth "
+                     "images' frame_id)");
+  command
+      .add_option("--pair-tolerance", args.pair_tolerance_ms,
+                  "ROS bags: milliseconds a colour image's stamp may be from its depth image's")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+}
+
+std::unique_ptr<core::FrameSource> openBag(const std::string& spec, const SourceArguments& args,
+                                           const std::optional<core::Intrinsics>& intrinsics) {
+#ifdef TESSERA_HAVE_ROS1
+  drivers::ros1::BagSourceOptions options;
+  options.intrinsics = intrinsics;
+  if (!args.topic_set.empty() || !args.topic_remaps.empty()) {
+    options.topics = drivers::ros1::namedTopics(args.topic_set.empty() ? "openni" : args.topic_set);
+    drivers::ros1::remapTopics(*options.topics, args.topic_remaps);
+    for (const std::string& remap : args.topic_remaps) {
+      options.pose_named = options.pose_named || remap.rfind("pose:=", 0) == 0;
+    }
+  }
+  options.world_frame = args.world_frame;
+  options.camera_frame = args.camera_frame;
+  options.pair_tolerance_ns = static_cast<std::int64_t>(args.pair_tolerance_ms * 1e6);
+  if (!args.calibration.empty()) {
+    options.colour_camera = drivers::v4l2::loadCameraCalibration(args.calibration).colour;
+  }
+  return drivers::ros1::openBagSource(spec, options);
+#else
+  (void)args;
+  (void)intrinsics;
+  throw core::SourceError(fmt::format(
+      "{}: this tessera was built without ROS 1; install it with scripts/setup.sh and build again "
+      "to read bags",
+      spec));
+#endif
+}
+
 }  // namespace
 
 void addSourceOptions(CLI::App& command, SourceArguments& args) {
@@ -59,6 +120,7 @@ void addSourceOptions(CLI::App& command, SourceArguments& args) {
                   "stalled")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
+  addRosOptions(command, args);
 }
 
 std::unique_ptr<core::FrameSource> openSource(const std::string& spec,
@@ -121,6 +183,7 @@ std::unique_ptr<core::FrameSource> openSource(const std::string& spec,
     if (args.depth_units_per_m > 0.0) options.depth_units_per_m = args.depth_units_per_m;
     return std::make_unique<drivers::DatasetSource>(spec, options);
   }
+  if (fs::path(spec).extension() == ".bag") return openBag(spec, args, intrinsics);
   if (fs::path(spec).extension() == ".oni") {
     drivers::oni::OniSourceOptions options;
     options.intrinsics = intrinsics;
@@ -132,7 +195,9 @@ std::unique_ptr<core::FrameSource> openSource(const std::string& spec,
   }
   if (fs::exists(spec, ec)) {
     throw core::SourceError(fmt::format(
-        "{}: not a source tessera can read; SOURCE must be an OpenNI2 recording (.oni), a "
+        "{}: not a source tessera can read; SOURCE must be an OpenNI2 recording (.oni), a ROS 1 "
+        "bag "
+        "(.bag), a "
         "synthetic scene (.yaml), a recorded dataset folder (TUM RGB-D, 7-Scenes, Redwood or "
         "slambook layout) or a live device (openni2://[URI], freenect://[N], v4l2://...)",
         spec));

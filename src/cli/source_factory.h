@@ -4,6 +4,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include <CLI/CLI.hpp>
 
@@ -23,6 +24,12 @@ struct SourceArguments {
   int frame_timeout_ms = 2000;             // --frame-timeout
   std::string calibration;                 // --calibration: host-side colour registration
   std::string record_path;  // set by `run --record` and `record`: the device records itself
+  // ROS 1 bags (.bag) and the ROS graph (ros://).
+  std::string topic_set;                  // --topics: openni or tum; default: what the bag has
+  std::vector<std::string> topic_remaps;  // --topic ROLE:=TOPIC
+  std::string world_frame = "world";      // --world-frame
+  std::string camera_frame;               // --camera-frame
+  double pair_tolerance_ms = 20.0;        // --pair-tolerance
 };
 
 void addSourceOptions(CLI::App& command, SourceArguments& args);

@@ -1,0 +1,291 @@
+#include "tessera/drivers/ros1/bag_source.h"
+
+#include <deque>
+
+#include <fmt/format.h>
+#include <geometry_msgs/PoseStamped.h>
+#include <spdlog/spdlog.h>
+#include <tf2_msgs/TFMessage.h>
+
+#include "internal/bag_messages.h"
+#include "internal/message_codec.h"
+#include "internal/transform_tree.h"
+#include "tessera/core/error.h"
+#include "tessera/core/frame_pairing.h"
+#include "tessera/drivers/ros1/ros_image.h"
+
+namespace tessera::drivers::ros1 {
+
+namespace {
+
+constexpr const char* kImageType = "sensor_msgs/Image";
+constexpr const char* kInfoType = "sensor_msgs/CameraInfo";
+// A depth frame waits for a colour image at most this many later depth frames.
+constexpr std::size_t kPairingLookahead = 3;
+
+std::string describeTopics(const std::map<std::string, TopicSummary>& topics) {
+  std::string text;
+  for (const auto& [topic, summary] : topics) {
+    text += fmt::format("\n  {} ({}, {} messages)", topic, summary.datatype, summary.messages);
+  }
+  return text.empty() ? " none" : text;
+}
+
+bool hasImageTopic(const std::map<std::string, TopicSummary>& topics, const std::string& name) {
+  const auto it = topics.find(name);
+  return it != topics.end() && it->second.datatype == kImageType;
+}
+
+class BagSource : public core::FrameSource {
+ public:
+  BagSource(std::filesystem::path path, const BagSourceOptions& options)
+      : path_(std::move(path)), options_(options) {
+    messages_ = openBagMessages(path_, salvage_note_);
+    if (!salvage_note_.empty()) {
+      spdlog::warn("{}: {}; playing what it holds", path_.string(), salvage_note_);
+    }
+    topics_ = chooseTopics();
+    readCalibrationAndPoses();
+    inbox_.colour_capacity = 64;
+    messages_->select({topics_.depth, topics_.colour});
+  }
+
+  core::ReadResult read() override {
+    for (;;) {
+      if (auto result = pairFront()) return std::move(*result);
+      if (at_end_) {
+        core::ReadResult end;
+        if (!salvage_note_.empty()) {
+          end.problem = fmt::format("{}: ended after {} frames: {}", path_.string(), frames_out_,
+                                    salvage_note_);
+        }
+        return end;
+      }
+      std::optional<RawMessage> raw = messages_->next();
+      if (!raw) {
+        at_end_ = true;
+        continue;
+      }
+      if (auto problem = take(*raw)) {
+        core::ReadResult bad;
+        bad.status = core::ReadStatus::kBadFrame;
+        bad.problem = std::move(*problem);
+        return bad;
+      }
+    }
+  }
+
+  std::string name() const override { return path_.string(); }
+  std::optional<std::size_t> frameCount() const override {
+    return messages_->topics().at(topics_.depth).messages;
+  }
+
+ private:
+  RosTopics chooseTopics() const {
+    const auto& topics = messages_->topics();
+    if (options_.topics) {
+      RosTopics chosen = *options_.topics;
+      for (const std::string* name : {&chosen.depth, &chosen.colour}) {
+        if (!hasImageTopic(topics, *name)) {
+          throw core::SourceError(fmt::format("{}: no {} topic {}; the bag has:{}", path_.string(),
+                                              kImageType, *name, describeTopics(topics)));
+        }
+      }
+      if (!chosen.pose.empty() && !topics.count(chosen.pose)) {
+        if (options_.pose_named) {
+          throw core::SourceError(fmt::format("{}: no pose topic {}; the bag has:{}",
+                                              path_.string(), chosen.pose, describeTopics(topics)));
+        }
+        chosen.pose.clear();
+      }
+      return chosen;
+    }
+    for (const RosTopics& known : {openniLaunchTopics(), tumTopics()}) {
+      if (hasImageTopic(topics, known.depth) && hasImageTopic(topics, known.colour)) {
+        RosTopics chosen = known;
+        if (!topics.count(chosen.pose)) chosen.pose.clear();
+        return chosen;
+      }
+    }
+    throw core::SourceError(fmt::format(
+        "{}: none of the known depth and colour topic sets ({}) is in the bag; name them with "
+        "--depth-topic and --colour-topic. The bag has:{}",
+        path_.string(), knownTopicSetNames(), describeTopics(topics)));
+  }
+
+  // The first camera_info of each camera, and every ground-truth transform, before the images.
+  void readCalibrationAndPoses() {
+    std::set<std::string> wanted = {topics_.depth_info, topics_.colour_info, "/tf_static"};
+    if (!topics_.pose.empty()) wanted.insert(topics_.pose);
+    messages_->select(wanted);
+    std::optional<core::Intrinsics> depth_info, colour_info;
+    while (std::optional<RawMessage> raw = messages_->next()) {
+      try {
+        if (raw->datatype == kInfoType && raw->topic == topics_.depth_info && !depth_info) {
+          depth_info = intrinsicsFromCameraInfo(decode<sensor_msgs::CameraInfo>(*raw));
+        } else if (raw->datatype == kInfoType && raw->topic == topics_.colour_info &&
+                   !colour_info) {
+          colour_info = intrinsicsFromCameraInfo(decode<sensor_msgs::CameraInfo>(*raw));
+        } else if (raw->topic == topics_.pose || raw->topic == "/tf_static") {
+          addPoses(*raw, raw->topic == "/tf_static");
+        }
+      } catch (const core::SourceError& e) {
+        spdlog::warn("{}: {}: {}", path_.string(), raw->topic, e.what());
+      }
+    }
+    if (options_.intrinsics) {
+      intrinsics_ = *options_.intrinsics;
+    } else if (depth_info && depth_info->valid()) {
+      intrinsics_ = *depth_info;
+    } else {
+      throw core::SourceError(
+          fmt::format("{}: no calibrated camera_info on {}; give the depth camera's --intrinsics",
+                      path_.string(), topics_.depth_info));
+    }
+    colour_camera_ = options_.colour_camera;
+    if (!colour_camera_ && colour_info && colour_info->valid() &&
+        (colour_info->width != intrinsics_.width || colour_info->height != intrinsics_.height)) {
+      spdlog::warn(
+          "{}: colour ({}x{}) is not registered to depth ({}x{}); without --calibration it is "
+          "placed as if both cameras sat at the same point",
+          path_.string(), colour_info->width, colour_info->height, intrinsics_.width,
+          intrinsics_.height);
+      colour_camera_ = core::ColourCamera{*colour_info, core::Isometry::Identity()};
+    }
+    if (!topics_.pose.empty() && poses_.empty()) {
+      spdlog::warn("{}: {} holds no transforms; the frames have no ground truth", path_.string(),
+                   topics_.pose);
+    }
+  }
+
+  void addPoses(const RawMessage& raw, bool is_static) {
+    if (raw.datatype == "tf2_msgs/TFMessage" || raw.datatype == "tf/tfMessage") {
+      for (const auto& stamped : decode<tf2_msgs::TFMessage>(raw).transforms) {
+        poses_.add(stamped.header.frame_id, stamped.child_frame_id,
+                   static_cast<std::int64_t>(stamped.header.stamp.toNSec()),
+                   isometryFromTransform(stamped.transform), is_static);
+      }
+    } else if (raw.datatype == "geometry_msgs/PoseStamped") {
+      const auto pose = decode<geometry_msgs::PoseStamped>(raw);
+      // The pose is the camera's own: it names the parent frame only.
+      poses_.add(pose.header.frame_id, kPoseTopicCamera,
+                 static_cast<std::int64_t>(pose.header.stamp.toNSec()), isometryFromPose(pose.pose),
+                 false);
+    } else {
+      throw core::SourceError(fmt::format(
+          "{} is not a pose topic tessera reads (tf2_msgs/TFMessage, geometry_msgs/PoseStamped)",
+          raw.datatype));
+    }
+  }
+
+  // Decodes a depth or colour message into the pairing queues; a problem for a bad one.
+  std::optional<std::string> take(const RawMessage& raw) {
+    try {
+      const auto image = decode<sensor_msgs::Image>(raw);
+      core::CapturedImage captured;
+      captured.stamp = static_cast<std::int64_t>(image.header.stamp.toNSec());
+      if (raw.topic == topics_.depth) {
+        captured.image = depthFromImage(image);
+        depth_frame_id_ = image.header.frame_id;
+        pending_depth_.push_back(std::move(captured));
+      } else {
+        captured.image = colourFromImage(image);
+        inbox_.pushColour(std::move(captured));
+      }
+      return std::nullopt;
+    } catch (const core::SourceError& e) {
+      return fmt::format("{}: {} message recorded at {:.3f} s: {}", path_.string(), raw.topic,
+                         static_cast<double>(raw.record_ns) * 1e-9, e.what());
+    }
+  }
+
+  // The oldest depth frame with its colour, once no later colour image can be nearer.
+  std::optional<core::ReadResult> pairFront() {
+    if (pending_depth_.empty()) return std::nullopt;
+    const std::int64_t stamp = pending_depth_.front().stamp;
+    std::unique_lock lock(inbox_.mutex);
+    const bool colour_passed =
+        !inbox_.colour.empty() && inbox_.colour.back().stamp >= stamp + options_.pair_tolerance_ns;
+    if (!at_end_ && !colour_passed && pending_depth_.size() <= kPairingLookahead) {
+      return std::nullopt;
+    }
+    std::optional<core::CapturedImage> colour = inbox_.takeColourNear(
+        lock, stamp, options_.pair_tolerance_ns, std::chrono::microseconds(0));
+    core::CapturedImage depth = std::move(pending_depth_.front());
+    pending_depth_.pop_front();
+    core::ReadResult result;
+    if (!colour) {
+      result.status = core::ReadStatus::kBadFrame;
+      result.problem = fmt::format("{}: depth image at {:.6f} s has no colour image within {} ms",
+                                   path_.string(), static_cast<double>(stamp) * 1e-9,
+                                   options_.pair_tolerance_ns / 1'000'000);
+      return result;
+    }
+    result.status = core::ReadStatus::kFrame;
+    core::Frame& frame = result.frame;
+    frame.index = frames_out_++;
+    frame.timestamp_ns = stamp;
+    frame.colour_timestamp_ns = colour->stamp;
+    frame.depth_mm = std::move(depth.image);
+    frame.rgb = std::move(colour->image);
+    frame.intrinsics = intrinsics_;
+    if (frame.intrinsics.width == 0) {
+      frame.intrinsics.width = frame.depth_mm.cols;
+      frame.intrinsics.height = frame.depth_mm.rows;
+    }
+    frame.colour_camera = colour_camera_;
+    if (!frame.colour_camera && frame.rgb.size() != frame.depth_mm.size()) {
+      result.status = core::ReadStatus::kBadFrame;
+      result.problem = fmt::format(
+          "{}: colour {}x{} differs from depth {}x{} and no camera_info says how; give "
+          "--calibration",
+          path_.string(), frame.rgb.cols, frame.rgb.rows, frame.depth_mm.cols, frame.depth_mm.rows);
+      return result;
+    }
+    if (!poses_.empty()) {
+      const std::string camera = !poseTopicIsTf()                 ? kPoseTopicCamera
+                                 : !options_.camera_frame.empty() ? options_.camera_frame
+                                                                  : depth_frame_id_;
+      frame.T_W_C_gt = poses_.lookup(options_.world_frame, camera, stamp);
+    }
+    return result;
+  }
+
+  bool poseTopicIsTf() const {
+    const auto& topics = messages_->topics();
+    const auto it = topics.find(topics_.pose);
+    return it == topics.end() || it->second.datatype != "geometry_msgs/PoseStamped";
+  }
+
+  // The frame name a PoseStamped topic's poses are filed under.
+  static constexpr const char* kPoseTopicCamera = "tessera/pose_topic";
+
+  std::filesystem::path path_;
+  BagSourceOptions options_;
+  std::unique_ptr<BagMessages> messages_;
+  std::string salvage_note_;
+  RosTopics topics_;
+  core::Intrinsics intrinsics_;
+  std::optional<core::ColourCamera> colour_camera_;
+  TransformTree poses_;
+  std::string depth_frame_id_;
+  std::deque<core::CapturedImage> pending_depth_;
+  core::PairingInbox inbox_;  // the colour images waiting to be paired
+  std::size_t frames_out_ = 0;
+  bool at_end_ = false;
+};
+
+}  // namespace
+
+bool isBagPath(const std::filesystem::path& path) { return path.extension() == ".bag"; }
+
+std::unique_ptr<core::FrameSource> openBagSource(const std::filesystem::path& path,
+                                                 const BagSourceOptions& options) {
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(path, ec)) {
+    throw core::SourceError(fmt::format("{}: no such file", path.string()));
+  }
+  return std::make_unique<BagSource>(path, options);
+}
+
+}  // namespace tessera::drivers::ros1
