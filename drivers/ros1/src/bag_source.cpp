@@ -1,5 +1,6 @@
 #include "tessera/drivers/ros1/bag_source.h"
 
+#include <algorithm>
 #include <deque>
 
 #include <fmt/format.h>
@@ -20,8 +21,9 @@ namespace {
 
 constexpr const char* kImageType = "sensor_msgs/Image";
 constexpr const char* kInfoType = "sensor_msgs/CameraInfo";
-// A depth frame waits for a colour image at most this many later depth frames.
-constexpr std::size_t kPairingLookahead = 3;
+// A depth frame is paired once this many later depth frames are read: a recorder may store a
+// colour image after the next depth images (about 130 ms late at 30 frames/s is allowed).
+constexpr std::size_t kPairingLookahead = 4;
 
 std::string describeTopics(const std::map<std::string, TopicSummary>& topics) {
   std::string text;
@@ -109,7 +111,7 @@ class BagSource : public core::FrameSource {
     }
     throw core::SourceError(fmt::format(
         "{}: none of the known depth and colour topic sets ({}) is in the bag; name them with "
-        "--depth-topic and --colour-topic. The bag has:{}",
+        "--topic depth:=TOPIC --topic colour:=TOPIC. The bag has:{}",
         path_.string(), knownTopicSetNames(), describeTopics(topics)));
   }
 
@@ -190,7 +192,15 @@ class BagSource : public core::FrameSource {
         pending_depth_.push_back(std::move(captured));
       } else {
         captured.image = colourFromImage(image);
-        inbox_.pushColour(std::move(captured));
+        // Kept in stamp order: a recorder may receive colour images out of order, and pairing
+        // drops every image older than the one it takes.
+        std::lock_guard lock(inbox_.mutex);
+        auto& queue = inbox_.colour;
+        const auto at = std::upper_bound(
+            queue.begin(), queue.end(), captured.stamp,
+            [](std::int64_t stamp, const core::CapturedImage& c) { return stamp < c.stamp; });
+        queue.insert(at, std::move(captured));
+        if (queue.size() > inbox_.colour_capacity) queue.pop_front();
       }
       return std::nullopt;
     } catch (const core::SourceError& e) {
@@ -199,16 +209,13 @@ class BagSource : public core::FrameSource {
     }
   }
 
-  // The oldest depth frame with its colour, once no later colour image can be nearer.
+  // The oldest depth frame with the colour image nearest in time, once any colour image for it
+  // has had time to be read.
   std::optional<core::ReadResult> pairFront() {
     if (pending_depth_.empty()) return std::nullopt;
     const std::int64_t stamp = pending_depth_.front().stamp;
+    if (!at_end_ && pending_depth_.size() <= kPairingLookahead) return std::nullopt;
     std::unique_lock lock(inbox_.mutex);
-    const bool colour_passed =
-        !inbox_.colour.empty() && inbox_.colour.back().stamp >= stamp + options_.pair_tolerance_ns;
-    if (!at_end_ && !colour_passed && pending_depth_.size() <= kPairingLookahead) {
-      return std::nullopt;
-    }
     std::optional<core::CapturedImage> colour = inbox_.takeColourNear(
         lock, stamp, options_.pair_tolerance_ns, std::chrono::microseconds(0));
     core::CapturedImage depth = std::move(pending_depth_.front());

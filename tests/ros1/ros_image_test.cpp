@@ -1,0 +1,149 @@
+// sensor_msgs/Image encodings to and from tessera's images.
+#include <random>
+
+#include <gtest/gtest.h>
+#include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "tessera/core/error.h"
+#include "tessera/drivers/ros1/ros_image.h"
+
+namespace tessera::drivers::ros1 {
+namespace {
+
+cv::Mat randomDepth(int width, int height, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_int_distribution<int> depth(0, 65535);
+  cv::Mat mm(height, width, CV_16UC1);
+  for (int y = 0; y < height; ++y) {
+    for (int x = 0; x < width; ++x) {
+      // Every fifth pixel has no depth.
+      mm.at<std::uint16_t>(y, x) = (x + y) % 5 == 0 ? 0 : static_cast<std::uint16_t>(depth(rng));
+    }
+  }
+  return mm;
+}
+
+// Smooth colour gradients: what demosaicking and 4:2:2 chroma can be judged on.
+cv::Mat smoothColour(int width, int height) {
+  cv::Mat rgb(height, width, CV_8UC3);
+  for (int y = 0; y < height; ++y) {
+    for (int x = 0; x < width; ++x) {
+      rgb.at<cv::Vec3b>(y, x) = cv::Vec3b(static_cast<std::uint8_t>(40 + x * 160 / width),
+                                          static_cast<std::uint8_t>(200 - y * 150 / height),
+                                          static_cast<std::uint8_t>(90 + (x + y) % 40));
+    }
+  }
+  return rgb;
+}
+
+double meanAbsoluteError(const cv::Mat& a, const cv::Mat& b) {
+  cv::Mat difference;
+  cv::absdiff(a, b, difference);
+  const cv::Scalar mean = cv::mean(difference);
+  return (mean[0] + mean[1] + mean[2]) / 3.0;
+}
+
+TEST(Ros1Image, DepthRoundTripsBitExactIn16UC1And32FC1) {
+  const cv::Mat depth = randomDepth(64, 48, 7);
+  for (const char* encoding : {"16UC1", "32FC1"}) {
+    const sensor_msgs::Image image = imageFromDepth(depth, encoding);
+    EXPECT_EQ(image.encoding, encoding);
+    const cv::Mat back = depthFromImage(image);
+    ASSERT_EQ(back.type(), CV_16UC1);
+    EXPECT_EQ(cv::norm(back, depth, cv::NORM_INF), 0.0) << encoding;
+  }
+}
+
+TEST(Ros1Image, MetricDepthLosesWhatIsNotADistance) {
+  sensor_msgs::Image image = imageFromDepth(cv::Mat(1, 5, CV_16UC1, cv::Scalar(0)), "32FC1");
+  const float metres[5] = {1.2344f, std::numeric_limits<float>::quiet_NaN(), -1.0f,
+                           std::numeric_limits<float>::infinity(), 70.0f};
+  std::memcpy(image.data.data(), metres, sizeof(metres));
+  const cv::Mat mm = depthFromImage(image);
+  EXPECT_EQ(mm.at<std::uint16_t>(0, 0), 1234);
+  for (int x = 1; x < 5; ++x) EXPECT_EQ(mm.at<std::uint16_t>(0, x), 0) << x;
+}
+
+TEST(Ros1Image, BigEndianDepthIsSwapped) {
+  const cv::Mat depth = randomDepth(8, 4, 3);
+  sensor_msgs::Image image = imageFromDepth(depth, "16UC1");
+  for (std::size_t i = 0; i + 1 < image.data.size(); i += 2)
+    std::swap(image.data[i], image.data[i + 1]);
+  image.is_bigendian = 1;
+  EXPECT_EQ(cv::norm(depthFromImage(image), depth, cv::NORM_INF), 0.0);
+}
+
+TEST(Ros1Image, EveryColourEncodingDecodesToTheImage) {
+  const cv::Mat rgb = smoothColour(96, 64);
+  for (const char* encoding : {"rgb8", "bgr8"}) {
+    EXPECT_EQ(cv::norm(colourFromImage(imageFromColour(rgb, encoding)), rgb, cv::NORM_INF), 0.0)
+        << encoding;
+  }
+  // A mosaic keeps one channel in three and 4:2:2 half the chroma: on a smooth image the
+  // decoded colour stays within a few levels. The wrong Bayer layout would swap red and blue
+  // (an error of about 50 levels here).
+  for (const char* encoding : {"bayer_rggb8", "bayer_bggr8", "bayer_gbrg8", "bayer_grbg8"}) {
+    const cv::Mat decoded = colourFromImage(imageFromColour(rgb, encoding));
+    const cv::Rect inner(2, 2, rgb.cols - 4, rgb.rows - 4);  // demosaicking guesses at borders
+    EXPECT_LT(meanAbsoluteError(decoded(inner), rgb(inner)), 4.0) << encoding;
+  }
+  for (const char* encoding : {"yuv422", "yuv422_yuy2"}) {
+    EXPECT_LT(meanAbsoluteError(colourFromImage(imageFromColour(rgb, encoding)), rgb), 3.0)
+        << encoding;
+  }
+}
+
+TEST(Ros1Image, FourChannelAndMonoColourAreRead) {
+  const cv::Mat rgb = smoothColour(16, 8);
+  cv::Mat rgba, bgra, grey;
+  cv::cvtColor(rgb, rgba, cv::COLOR_RGB2RGBA);
+  cv::cvtColor(rgb, bgra, cv::COLOR_RGB2BGRA);
+  cv::cvtColor(rgb, grey, cv::COLOR_RGB2GRAY);
+  sensor_msgs::Image image = imageFromColour(rgb, "rgb8");
+  const auto as = [&](const cv::Mat& pixels, const char* encoding) {
+    sensor_msgs::Image message = image;
+    message.encoding = encoding;
+    message.step = static_cast<std::uint32_t>(pixels.cols * pixels.elemSize());
+    message.data.assign(pixels.datastart, pixels.dataend);
+    return colourFromImage(message);
+  };
+  EXPECT_EQ(cv::norm(as(rgba, "rgba8"), rgb, cv::NORM_INF), 0.0);
+  EXPECT_EQ(cv::norm(as(bgra, "bgra8"), rgb, cv::NORM_INF), 0.0);
+  const cv::Mat from_grey = as(grey, "mono8");
+  std::vector<cv::Mat> channels;
+  cv::split(from_grey, channels);
+  EXPECT_EQ(cv::norm(channels[0], grey, cv::NORM_INF), 0.0);
+}
+
+TEST(Ros1Image, UnknownEncodingsAndShortDataAreNamed) {
+  sensor_msgs::Image image = imageFromColour(smoothColour(8, 4), "rgb8");
+  image.encoding = "jpeg";
+  try {
+    colourFromImage(image);
+    FAIL() << "an unknown encoding was read";
+  } catch (const core::SourceError& e) {
+    EXPECT_NE(std::string(e.what()).find("'jpeg'"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("bayer_grbg8"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(depthFromImage(image), core::SourceError);
+  sensor_msgs::Image short_depth = imageFromDepth(randomDepth(8, 4, 1), "16UC1");
+  short_depth.data.resize(10);
+  EXPECT_THROW(depthFromImage(short_depth), core::SourceError);
+}
+
+TEST(Ros1Image, CameraInfoCarriesTheIntrinsics) {
+  core::Intrinsics k;
+  k.width = 640, k.height = 480, k.fx = 517.3, k.fy = 516.5, k.cx = 318.6, k.cy = 255.3;
+  const core::Intrinsics back = intrinsicsFromCameraInfo(cameraInfoFromIntrinsics(k));
+  EXPECT_EQ(back.width, 640);
+  EXPECT_EQ(back.height, 480);
+  EXPECT_DOUBLE_EQ(back.fx, k.fx);
+  EXPECT_DOUBLE_EQ(back.fy, k.fy);
+  EXPECT_DOUBLE_EQ(back.cx, k.cx);
+  EXPECT_DOUBLE_EQ(back.cy, k.cy);
+  EXPECT_FALSE(intrinsicsFromCameraInfo(sensor_msgs::CameraInfo()).valid());
+}
+
+}  // namespace
+}  // namespace tessera::drivers::ros1
