@@ -7,6 +7,7 @@
 #include "eval_command.h"
 #include "match_command.h"
 #include "pattern_command.h"
+#include "play_command.h"
 #include "record_command.h"
 #include "run_command.h"
 #include "tessera/core/error.h"
@@ -25,6 +26,8 @@ int main(int argc, char** argv) {
   CLI::App* run = tessera::cli::addRunCommand(app, run_args);
   tessera::cli::RecordArguments record_args;
   CLI::App* record = tessera::cli::addRecordCommand(app, record_args);
+  tessera::cli::PlayArguments play_args;
+  CLI::App* play = tessera::cli::addPlayCommand(app, play_args);
   tessera::cli::RecordArguments synth_args;
   CLI::App* synth = tessera::cli::addSynthCommand(app, synth_args);
   tessera::cli::EvalArguments eval_args;
@@ -46,6 +49,7 @@ int main(int argc, char** argv) {
   }
   if (run->parsed()) return tessera::cli::runCommand(run_args);
   if (record->parsed()) return tessera::cli::recordCommand(record_args);
+  if (play->parsed()) return tessera::cli::playCommand(play_args);
   if (synth->parsed()) return tessera::cli::synthCommand(synth_args);
   if (eval->parsed()) return tessera::cli::evalCommand(eval_args);
   if (devices->parsed()) return tessera::cli::devicesCommand();

@@ -7,6 +7,7 @@
 #include <opencv2/core/utility.hpp>
 
 #include "progress_line.h"
+#include "ros_publishing.h"
 #include "source_factory.h"
 #include "stop_request.h"
 #include "tessera/core/error.h"
@@ -21,10 +22,11 @@ CLI::App* addRunCommand(CLI::App& app, RunArguments& args) {
       "run", "Build a map from SOURCE and write it, with report.json and stats.jsonl, to --out");
   run->add_option(
       "SOURCE", args.source,
-      "OpenNI2 recording (.oni), recorded dataset folder (TUM RGB-D, 7-Scenes, "
-      "Redwood, slambook), synthetic scene (.yaml) or live device (openni2://, "
-      "openni2://URI, freenect://N, v4l2:///dev/videoN?depth=/dev/videoM; docs/ROBOT.md). Default: "
-      "recordings/office.oni (rendered by the build)");
+      "OpenNI2 recording (.oni), ROS 1 bag (.bag), recorded dataset folder (TUM RGB-D, "
+      "7-Scenes, Redwood, slambook), synthetic scene (.yaml), live device (openni2://, "
+      "openni2://URI, freenect://N, v4l2:///dev/videoN?depth=/dev/videoM; docs/ROBOT.md) or a "
+      "ROS 1 graph (ros://[HOST:PORT]; docs/ROS.md). Default: recordings/office.oni (rendered by "
+      "the build)");
   run->add_option("--config", args.config, "YAML config (keys as in config/default.yaml)")
       ->check(CLI::ExistingFile);
   run->add_option("--out", args.out_dir, "Output folder (created if needed)")
@@ -62,6 +64,15 @@ CLI::App* addRunCommand(CLI::App& app, RunArguments& args) {
                   "Require this bearer token on every monitor request (also read from "
                   "TESSERA_MONITOR_TOKEN, which keeps it out of the process list)")
       ->envname("TESSERA_MONITOR_TOKEN");
+  run->add_option("--publish", args.publish,
+                  "Publish the map on a ROS 1 graph, ros://[HOST:PORT] (docs/ROS.md: pose on "
+                  "/tf, patches as RViz markers, figures on /diagnostics, exported files), or "
+                  "none. Default: a ros:// SOURCE publishes to its own graph");
+  run->add_option("--map-frame", args.map_frame, "--publish: the tf frame of the map")
+      ->capture_default_str();
+  run->add_option("--tf-camera-frame", args.published_camera_frame,
+                  "--publish: the tf frame tessera moves with the camera pose (map -> it)")
+      ->capture_default_str();
   run->add_flag("--quiet", args.quiet,
                 "No progress line on a terminal, nor periodic progress lines in a log");
   addSourceOptions(*run, args.source_args);
@@ -92,8 +103,11 @@ int runCommand(const RunArguments& args) {
       spdlog::info("monitor: {}{}", server->url(),
                    args.monitor_token.empty() ? "" : " (bearer token required)");
     }
+    const std::unique_ptr<pipeline::RunListener> publisher =
+        openMapPublisher(args, source_spec, monitor);
     pipeline::RunOptions run_options;
     run_options.monitor = &monitor;
+    run_options.listener = publisher.get();
     run_options.out_dir = args.out_dir;
     run_options.threads = threads;
     run_options.poses =

@@ -21,6 +21,11 @@ struct RunArguments {
   std::string monitor;        // [ADDR:]PORT of the HTTP monitor; empty: none
   std::string monitor_token;  // required by the monitor when not empty
   bool quiet = false;         // no progress line or periodic progress log
+  // ROS 1: where to publish the map (ros://[HOST:PORT], or none); empty: a ros:// source's
+  // own graph, else nowhere.
+  std::string publish;
+  std::string map_frame = "map";                          // --map-frame
+  std::string published_camera_frame = "tessera_camera";  // --tf-camera-frame
   SourceArguments source_args;
 };
 

@@ -16,6 +16,7 @@
 #include "tessera/drivers/v4l2/v4l2_source.h"
 #ifdef TESSERA_HAVE_ROS1
 #include "tessera/drivers/ros1/bag_source.h"
+#include "tessera/drivers/ros1/ros_source.h"
 #endif
 
 namespace tessera::cli {
@@ -31,15 +32,17 @@ namespace {
 
 void addRosOptions(CLI::App& command, SourceArguments& args) {
   command
-      .add_option("--topics", args.topic_set,
-                  "ROS bags: the topic names of openni (openni2_launch and freenect_launch with "
-                  "depth registration) or tum (the TUM RGB-D bags); default: the first set the "
-                  "bag has")
+      .add_option(
+          "--topics", args.topic_set,
+          "ROS bags and ros://: the topic names of openni (openni2_launch and freenect_launch with "
+          "depth registration) or tum (the TUM RGB-D bags); default: the first set the "
+          "bag has")
       ->check(CLI::IsMember({"openni", "tum"}));
-  command.add_option("--topic", args.topic_remaps,
-                     "ROS bags: one topic named in ROS's remapping syntax ROLE:=TOPIC, ROLE one "
-                     "of depth, colour, depth_info, colour_info, pose (tf or PoseStamped ground "
-                     "truth); may be repeated");
+  command.add_option(
+      "--topic", args.topic_remaps,
+      "ROS bags and ros://: one topic named in ROS's remapping syntax ROLE:=TOPIC, ROLE one "
+      "of depth, colour, depth_info, colour_info, pose (tf or PoseStamped ground "
+      "truth); may be repeated");
   command
       .add_option("--world-frame", args.world_frame,
                   "ROS bags: the tf frame the ground-truth poses are given in")
@@ -48,8 +51,9 @@ void addRosOptions(CLI::App& command, SourceArguments& args) {
                      "ROS bags: the tf frame whose pose is the camera's (default: the depth "
                      "images' frame_id)");
   command
-      .add_option("--pair-tolerance", args.pair_tolerance_ms,
-                  "ROS bags: milliseconds a colour image's stamp may be from its depth image's")
+      .add_option(
+          "--pair-tolerance", args.pair_tolerance_ms,
+          "ROS bags and ros://: milliseconds a colour image's stamp may be from its depth image's")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
 }
@@ -79,6 +83,36 @@ std::unique_ptr<core::FrameSource> openBag(const std::string& spec, const Source
   throw core::SourceError(fmt::format(
       "{}: this tessera was built without ROS 1; install it with scripts/setup.sh and build again "
       "to read bags",
+      spec));
+#endif
+}
+
+std::unique_ptr<core::FrameSource> openRos(const std::string& spec, const SourceArguments& args,
+                                           const std::optional<core::Intrinsics>& intrinsics) {
+#ifdef TESSERA_HAVE_ROS1
+  drivers::ros1::RosSourceOptions options;
+  options.master_uri = *drivers::ros1::parseRosUri(spec);
+  if (!args.topic_set.empty()) options.topics = *drivers::ros1::namedTopics(args.topic_set);
+  drivers::ros1::remapTopics(options.topics, args.topic_remaps);
+  options.intrinsics = intrinsics;
+  options.pair_tolerance_ns = static_cast<std::int64_t>(args.pair_tolerance_ms * 1e6);
+  options.frame_timeout_ms = args.frame_timeout_ms;
+  options.reconnect_timeout_s = args.reconnect_timeout_s;
+  options.stop = &stopOnInterrupt();
+  if (!args.calibration.empty()) {
+    options.colour_camera = drivers::v4l2::loadCameraCalibration(args.calibration).colour;
+  }
+  if (!args.record_path.empty()) {
+    throw core::ConfigError(
+        "--record: a ROS source does not record itself; record its topics with rosbag record, "
+        "which tessera replays");
+  }
+  return drivers::ros1::openRosSource(options);
+#else
+  (void)args;
+  (void)intrinsics;
+  throw core::SourceError(fmt::format(
+      "{}: this tessera was built without ROS 1; install it with scripts/setup.sh and build again",
       spec));
 #endif
 }
@@ -127,6 +161,7 @@ std::unique_ptr<core::FrameSource> openSource(const std::string& spec,
                                               const SourceArguments& args) {
   std::optional<core::Intrinsics> intrinsics;
   if (!args.intrinsics.empty()) intrinsics = core::parseIntrinsicsSpec(args.intrinsics);
+  if (spec.rfind("ros://", 0) == 0) return openRos(spec, args, intrinsics);
   if (const auto uri = drivers::openni2::parseOpenNi2Uri(spec)) {
     drivers::openni2::OpenNi2Options options;
     options.uri = *uri;
@@ -199,7 +234,8 @@ std::unique_ptr<core::FrameSource> openSource(const std::string& spec,
         "bag "
         "(.bag), a "
         "synthetic scene (.yaml), a recorded dataset folder (TUM RGB-D, 7-Scenes, Redwood or "
-        "slambook layout) or a live device (openni2://[URI], freenect://[N], v4l2://...)",
+        "slambook layout), a live device (openni2://[URI], freenect://[N], v4l2://...) or a ROS "
+        "graph (ros://[HOST:PORT])",
         spec));
   }
   throw core::SourceError(fmt::format("{}: no such file or folder", spec));

@@ -23,6 +23,18 @@ void createOutputDir(const std::filesystem::path& dir) {
   }
 }
 
+// The map's files as `tessera run` writes them (docs/CLI.md), those that exist.
+std::vector<std::filesystem::path> exportedFiles(const std::filesystem::path& out_dir) {
+  std::vector<std::filesystem::path> files;
+  for (const char* name : {"map.glb", "map.obj", "patches.obj", "patches.json", "mesh.ply",
+                           "textures.db", "trajectory.txt", "report.json"}) {
+    std::error_code ec;
+    const std::filesystem::path file = std::filesystem::absolute(out_dir / name, ec);
+    if (!ec && std::filesystem::exists(file, ec)) files.push_back(file);
+  }
+  return files;
+}
+
 }  // namespace
 
 // Builds the stages (run_parts.cpp), runs them as a flow graph (flow_graph.cpp), sums up the
@@ -51,6 +63,7 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
   summary.cpu.finish_s = core::processCpuSeconds() - cpu_graph_done_s;
   writeReport(summary, options.out_dir / "report.json");
   if (options.monitor != nullptr) options.monitor->finish(reportJson(summary));
+  if (options.listener != nullptr) options.listener->onExported(exportedFiles(options.out_dir));
   return summary;
 }
 

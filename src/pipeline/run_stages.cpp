@@ -21,15 +21,29 @@ std::vector<planes::PatchEvent> RunStages::finishStream(
   return planes_.finishStream(finalized, loop_closer_->correction());
 }
 
+void RunStages::frameDone(const FusedFrame& fused) {
+  sink_.process(fused);
+  if (listener_ == nullptr || fused.frame.source_interrupted) return;
+  if (const std::optional<core::Isometry> pose = mapPoseOf(fused)) {
+    listener_->onPose(fused.frame.timestamp_ns, *pose);
+  }
+}
+
 std::optional<CommitMessage> RunStages::commit(DescribedPatch described) {
   if (described.retired) {
     commit_.retire(*described.retired);
+    if (listener_ != nullptr) listener_->onPatchRetired(*described.retired);
     return std::nullopt;
   }
   CommitMessage message;
   message.batch = described.batchInfo();
   std::optional<texture::PatchBitmap> bitmap = described.bitmap;
+  const planes::Patch::Frame plane = described.plane;
   message.record = commit_.process(std::move(described));
+  if (listener_ != nullptr && bitmap && message.record.instance) {
+    listener_->onPatch({bitmap->id, bitmap->version, message.record.instance->reused, plane,
+                        &bitmap->grid, &bitmap->image});
+  }
   bitmaps_.keep(std::move(bitmap));
   const CommitRecord& record = message.record;
   const CommitFigures& totals = commit_.figures();

@@ -85,8 +85,7 @@ void StatsSink::process(const FusedFrame& fused) {
   const double cpu_s = core::processCpuSeconds();
   const double cpu_ms = 1e3 * (cpu_s - cpu_last_frame_s_);
   cpu_last_frame_s_ = cpu_s;
-  // The map's pose of the frame: corrected against the patches when the plane stage did so.
-  const std::optional<core::Isometry> pose = fused.T_W_C_planes ? fused.T_W_C_planes : fused.T_W_C;
+  const std::optional<core::Isometry> pose = mapPoseOf(fused);
   if (pose) estimate_[fused.frame.timestamp_ns] = *pose;
   if (fused.frame.T_W_C_gt) ground_truth_[fused.frame.timestamp_ns] = *fused.frame.T_W_C_gt;
   const std::size_t bitmap_bytes = bitmap_bytes_ ? bitmap_bytes_() : 0;

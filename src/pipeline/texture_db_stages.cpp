@@ -43,6 +43,7 @@ DescribedPatch DescribeStage::describe(const PatchJob& job) const {
   described.finalized_at = job.finalized_at;
   described.retired = job.retired;
   if (job.retired) return described;
+  described.plane = job.patch.frame;
   try {
     described.bitmap = texture::buildBitmap(job.patch, bitmaps_);
   } catch (const std::exception& e) {  // cv::Exception, bad_alloc: this patch goes untextured

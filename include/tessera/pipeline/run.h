@@ -12,6 +12,7 @@
 #include "tessera/core/trajectory.h"
 #include "tessera/db/texture_store.h"
 #include "tessera/pipeline/run_config.h"
+#include "tessera/pipeline/run_listener.h"
 #include "tessera/pipeline/stage_figures.h"
 #include "tessera/pipeline/stages.h"
 
@@ -31,6 +32,8 @@ struct RunOptions {
   StatsSink::ProgressCallback on_progress;  // may be empty
   // Updated with every frame and commit, and given report.json at the end (may be null).
   MapMonitor* monitor = nullptr;
+  // Told every pose, committed or retired patch and the exported files (may be null).
+  RunListener* listener = nullptr;
   const std::atomic<bool>* stop = nullptr;  // set (e.g. by Ctrl-C) to end the stream early
 };
 

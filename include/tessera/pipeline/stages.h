@@ -107,6 +107,11 @@ struct FusedFrame {
   std::vector<planes::PatchSnapshot> finalized_patches;
 };
 
+// The map's pose of a frame: corrected against the patches when the plane stage did so.
+inline std::optional<core::Isometry> mapPoseOf(const FusedFrame& fused) {
+  return fused.T_W_C_planes ? fused.T_W_C_planes : fused.T_W_C;
+}
+
 // Registers colour to depth and gives each frame its pose: tracked, or the ground truth. A
 // frame whose tracking is lost gets no pose, so it cannot corrupt the map.
 class TrackingStage {

@@ -46,6 +46,7 @@ struct DescribedPatch {
   std::size_t sequence = 0;
   int patch_id = 0;
   std::optional<int> retired;  // a retirement (PatchJob), nothing built
+  planes::Patch::Frame plane;  // the patch's plane in the world: where its bitmap lies
   std::size_t batch = 0;
   std::size_t batch_size = 0;
   std::uint64_t frame_index = 0;

@@ -5,6 +5,7 @@
 // the report.
 #include "tessera/loop/loop_closer.h"
 #include "tessera/pipeline/flow_graph.h"
+#include "tessera/pipeline/run_listener.h"
 
 namespace tessera::pipeline::internal {
 
@@ -12,7 +13,8 @@ class RunStages : public FramePath, public PatchPath, public RunReport {
  public:
   RunStages(SourceStage& source, TrackingStage& tracking, IntegrationStage& integration,
             PlaneStage& planes, const DescribeStage& describe, CommitStage& commit,
-            BitmapFiles& bitmaps, StatsSink& sink, loop::LoopCloser* loop_closer)
+            BitmapFiles& bitmaps, StatsSink& sink, loop::LoopCloser* loop_closer,
+            RunListener* listener)
       : source_(source),
         tracking_(tracking),
         integration_(integration),
@@ -21,7 +23,8 @@ class RunStages : public FramePath, public PatchPath, public RunReport {
         commit_(commit),
         bitmaps_(bitmaps),
         sink_(sink),
-        loop_closer_(loop_closer) {}
+        loop_closer_(loop_closer),
+        listener_(listener) {}
 
   std::optional<core::Frame> next() override { return source_.next(); }
   TrackedFrame track(core::Frame frame) override { return tracking_.process(std::move(frame)); }
@@ -37,7 +40,7 @@ class RunStages : public FramePath, public PatchPath, public RunReport {
   DescribedPatch describe(const PatchJob& job) const override { return describe_.process(job); }
   std::optional<CommitMessage> commit(DescribedPatch described) override;
 
-  void frameDone(const FusedFrame& fused) override { sink_.process(fused); }
+  void frameDone(const FusedFrame& fused) override;
   void committed(const CommitMessage& commit) override { sink_.writeCommit(commit); }
   void patchEvents(const std::vector<planes::PatchEvent>& events) override {
     sink_.writePatchEvents(events);
@@ -56,6 +59,7 @@ class RunStages : public FramePath, public PatchPath, public RunReport {
   BitmapFiles& bitmaps_;
   StatsSink& sink_;
   loop::LoopCloser* loop_closer_;  // null without loop closure
+  RunListener* listener_;          // may be null
   double loop_wait_s_ = 0.0;
 };
 
