@@ -68,7 +68,12 @@ std::optional<core::Frame> SourceStage::read() {
       case core::ReadStatus::kEndOfData:
         if (!result.problem.empty()) {
           figures_.end_problem = result.problem;
-          spdlog::error("{}: {}", source_.name(), result.problem);
+          // Sources that name themselves in the message (recordings do) are not named twice.
+          if (result.problem.rfind(source_.name(), 0) == 0) {
+            spdlog::error("{}", result.problem);
+          } else {
+            spdlog::error("{}: {}", source_.name(), result.problem);
+          }
         }
         return std::nullopt;
     }

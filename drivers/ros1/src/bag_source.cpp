@@ -204,7 +204,7 @@ class BagSource : public core::FrameSource {
       }
       return std::nullopt;
     } catch (const core::SourceError& e) {
-      return fmt::format("{}: {} message recorded at {:.3f} s: {}", path_.string(), raw.topic,
+      return fmt::format("{} message recorded at {:.3f} s: {}", raw.topic,
                          static_cast<double>(raw.record_ns) * 1e-9, e.what());
     }
   }
@@ -223,9 +223,9 @@ class BagSource : public core::FrameSource {
     core::ReadResult result;
     if (!colour) {
       result.status = core::ReadStatus::kBadFrame;
-      result.problem = fmt::format("{}: depth image at {:.6f} s has no colour image within {} ms",
-                                   path_.string(), static_cast<double>(stamp) * 1e-9,
-                                   options_.pair_tolerance_ns / 1'000'000);
+      result.problem =
+          fmt::format("depth image at {:.6f} s has no colour image within {} ms",
+                      static_cast<double>(stamp) * 1e-9, options_.pair_tolerance_ns / 1'000'000);
       return result;
     }
     result.status = core::ReadStatus::kFrame;
@@ -244,9 +244,9 @@ class BagSource : public core::FrameSource {
     if (!frame.colour_camera && frame.rgb.size() != frame.depth_mm.size()) {
       result.status = core::ReadStatus::kBadFrame;
       result.problem = fmt::format(
-          "{}: colour {}x{} differs from depth {}x{} and no camera_info says how; give "
+          "colour {}x{} differs from depth {}x{} and no camera_info says how; give "
           "--calibration",
-          path_.string(), frame.rgb.cols, frame.rgb.rows, frame.depth_mm.cols, frame.depth_mm.rows);
+          frame.rgb.cols, frame.rgb.rows, frame.depth_mm.cols, frame.depth_mm.rows);
       return result;
     }
     if (!poses_.empty()) {

@@ -48,7 +48,7 @@ class RosSource : public core::FrameSource {
       if (!waitForPublisher()) {
         ended_ = true;
         core::ReadResult end;
-        end.problem = fmt::format("no depth image on {} for {:.0f} s; the stream ends",
+        end.problem = fmt::format("{}: no depth image on {} for {:.0f} s; the stream ends", label_,
                                   options_.topics.depth, options_.reconnect_timeout_s);
         return end;
       }
@@ -193,8 +193,8 @@ class RosSource : public core::FrameSource {
     lock.unlock();
     if (!colour) {
       result.status = core::ReadStatus::kBadFrame;
-      result.problem = fmt::format("{}: depth image at {:.6f} s has no colour image within {} ms",
-                                   label_, static_cast<double>(depth.stamp) * 1e-9,
+      result.problem = fmt::format("depth image at {:.6f} s has no colour image within {} ms",
+                                   static_cast<double>(depth.stamp) * 1e-9,
                                    options_.pair_tolerance_ns / 1'000'000);
       return result;
     }
@@ -205,8 +205,8 @@ class RosSource : public core::FrameSource {
       frame.intrinsics = *info;
     } else {
       result.status = core::ReadStatus::kBadFrame;
-      result.problem = fmt::format("{}: no calibrated camera_info on {} yet; give --intrinsics",
-                                   label_, options_.topics.depth_info);
+      result.problem = fmt::format("no calibrated camera_info on {} yet; give --intrinsics",
+                                   options_.topics.depth_info);
       return result;
     }
     frame.index = frames_out_++;
