@@ -23,6 +23,13 @@ void PairingInbox::pushColour(CapturedImage frame) {
   changed.notify_all();
 }
 
+LiveStats PairingInbox::withCounts(LiveStats stats) {
+  std::lock_guard lock(mutex);
+  stats.frames_delivered = delivered;
+  stats.frames_dropped = dropped;
+  return stats;
+}
+
 void PairingInbox::clearFrames() {
   depth.clear();
   colour.clear();

@@ -85,13 +85,7 @@ class FreenectSource : public core::FrameSource {
   core::ReadResult read() override;
   std::string name() const override { return name_; }
   bool isLive() const override { return true; }
-  core::LiveStats liveStats() const override {
-    core::LiveStats stats = stats_;
-    std::lock_guard lock(inbox_.mutex);
-    stats.frames_delivered = inbox_.delivered;
-    stats.frames_dropped = inbox_.dropped;
-    return stats;
-  }
+  core::LiveStats liveStats() const override { return inbox_.withCounts(stats_); }
 
  private:
   void connect();

@@ -364,13 +364,7 @@ std::string OpenNi2Source::name() const { return deviceLabel(state_->uri); }
 const core::Intrinsics& OpenNi2Source::intrinsics() const { return state_->intrinsics; }
 bool OpenNi2Source::hardwareRegistration() const { return state_->hardware_registration; }
 
-core::LiveStats OpenNi2Source::liveStats() const {
-  core::LiveStats stats = state_->stats;
-  std::lock_guard lock(state_->inbox.mutex);
-  stats.frames_delivered = state_->inbox.delivered;
-  stats.frames_dropped = state_->inbox.dropped;
-  return stats;
-}
+core::LiveStats OpenNi2Source::liveStats() const { return state_->inbox.withCounts(state_->stats); }
 
 void OpenNi2Source::stopStreaming() {
   State& s = *state_;

@@ -15,12 +15,6 @@ namespace tessera::drivers::ros1 {
 
 namespace {
 
-ros::Time rosTime(std::int64_t ns) {
-  ros::Time time;
-  time.fromNSec(static_cast<std::uint64_t>(std::max<std::int64_t>(ns, 0)));
-  return time;
-}
-
 // A bag refuses messages recorded at time zero; a recording whose clock starts at zero keeps
 // its header stamps and is recorded a nanosecond later.
 ros::Time recordTime(std::int64_t ns) { return rosTime(std::max<std::int64_t>(ns, 1)); }

@@ -2,20 +2,11 @@
 
 #include <ros/ros.h>
 
+#include "internal/message_codec.h"
 #include "tessera/drivers/ros1/ros_image.h"
 #include "tessera/drivers/ros1/ros_node.h"
 
 namespace tessera::drivers::ros1 {
-
-namespace {
-
-ros::Time rosTime(std::int64_t ns) {
-  ros::Time time;
-  time.fromNSec(static_cast<std::uint64_t>(std::max<std::int64_t>(ns, 0)));
-  return time;
-}
-
-}  // namespace
 
 struct RosFramePublisher::Topics {
   ros::Publisher depth, colour, depth_info, colour_info;

@@ -59,13 +59,7 @@ class RosSource : public core::FrameSource {
   std::string name() const override { return label_; }
   bool isLive() const override { return true; }
 
-  core::LiveStats liveStats() const override {
-    core::LiveStats stats = stats_;
-    std::lock_guard lock(inbox_.mutex);
-    stats.frames_delivered = inbox_.delivered;
-    stats.frames_dropped = inbox_.dropped;
-    return stats;
-  }
+  core::LiveStats liveStats() const override { return inbox_.withCounts(stats_); }
 
   void stopStreaming() override {
     unsubscribe();

@@ -12,6 +12,8 @@
 
 #include <opencv2/core/mat.hpp>
 
+#include "tessera/core/frame_source.h"
+
 namespace tessera::core {
 
 // One image as the device's thread hands it over.
@@ -40,6 +42,8 @@ struct PairingInbox {
   void pushColour(CapturedImage frame);
   // Empties the queues for a new connection (the counts stay).
   void clearFrames();
+  // `stats` with the delivered and dropped counts filled in (takes the mutex).
+  LiveStats withCounts(LiveStats stats);
 
   // With `lock` held on `mutex`: the colour frame nearest `stamp`, at most `tolerance` away,
   // after waiting up to `wait` for one at or after stamp - tolerance (it may not have come yet).

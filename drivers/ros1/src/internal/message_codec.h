@@ -1,6 +1,7 @@
 #pragma once
 // ROS 1 messages to and from their serialized bytes, and geometry messages to and from
 // tessera's poses.
+#include <algorithm>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -29,6 +30,13 @@ M decode(const RawMessage& raw) {
         fmt::format("a {} message that cannot be read: {}", raw.datatype, e.what()));
   }
   return message;
+}
+
+// ROS time from nanoseconds (negative: 0).
+inline ros::Time rosTime(std::int64_t ns) {
+  ros::Time time;
+  time.fromNSec(static_cast<std::uint64_t>(std::max<std::int64_t>(ns, 0)));
+  return time;
 }
 
 inline core::Isometry isometryFromTransform(const geometry_msgs::Transform& t) {
