@@ -303,6 +303,30 @@ TEST(Ros1Bag, ABagWithoutTheTopicsListsTheTopicsItHas) {
             std::string::npos);
 }
 
+TEST(Ros1Bag, AColourTopicInAnEncodingNotReadEndsWithOneError) {
+  const fs::path path = test::freshTempDir() / "jpeg.bag";
+  const RosTopics topics = openniLaunchTopics();
+  {
+    rosbag::Bag bag(path.string(), rosbag::bagmode::Write);
+    for (int i = 0; i < 8; ++i) {
+      const std::int64_t t = 1'000'000'000LL + i * 33'000'000LL;
+      writeImage(bag, topics.depth, true, i, t, t);
+      sensor_msgs::Image colour =
+          imageFromColour(cv::Mat(120, 160, CV_8UC3, cv::Scalar::all(10)), "rgb8");
+      colour.encoding = "jpeg";  // what a compressed stream republished wrongly might say
+      colour.header.stamp.fromNSec(static_cast<std::uint64_t>(t));
+      bag.write(topics.colour, colour.header.stamp, colour);
+    }
+    bag.close();
+  }
+  auto source = openBagSource(path);
+  const Played played = playAll(*source);
+  EXPECT_TRUE(played.frames.empty());
+  EXPECT_LE(played.bad.size(), 1u) << "one error, not one per frame";
+  EXPECT_NE(played.end_problem.find("'jpeg'"), std::string::npos) << played.end_problem;
+  EXPECT_NE(played.end_problem.find(topics.colour), std::string::npos) << played.end_problem;
+}
+
 TEST(Ros1Bag, WhatIsNotABagIsNamed) {
   const fs::path dir = test::freshTempDir();
   std::ofstream(dir / "notes.bag") << "not a bag at all\n";

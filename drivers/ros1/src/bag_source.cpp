@@ -57,7 +57,9 @@ class BagSource : public core::FrameSource {
       if (auto result = pairFront()) return std::move(*result);
       if (at_end_) {
         core::ReadResult end;
-        if (!salvage_note_.empty()) {
+        if (!unreadable_.empty()) {
+          end.problem = unreadable_;
+        } else if (!salvage_note_.empty()) {
           end.problem = fmt::format("{}: ended after {} frames: {}", path_.string(), frames_out_,
                                     salvage_note_);
         }
@@ -184,9 +186,18 @@ class BagSource : public core::FrameSource {
   std::optional<std::string> take(const RawMessage& raw) {
     try {
       const auto image = decode<sensor_msgs::Image>(raw);
+      const bool depth = raw.topic == topics_.depth;
+      if (depth ? !readsDepthEncoding(image.encoding) : !readsColourEncoding(image.encoding)) {
+        unreadable_ =
+            fmt::format("{}: {} is in encoding '{}', which tessera does not read as {} ({})",
+                        path_.string(), raw.topic, image.encoding, depth ? "depth" : "colour",
+                        depth ? "16UC1, mono16, 32FC1" : readableColourEncodings());
+        at_end_ = true;
+        return std::nullopt;
+      }
       core::CapturedImage captured;
       captured.stamp = static_cast<std::int64_t>(image.header.stamp.toNSec());
-      if (raw.topic == topics_.depth) {
+      if (depth) {
         captured.image = depthFromImage(image);
         depth_frame_id_ = image.header.frame_id;
         pending_depth_.push_back(std::move(captured));
@@ -271,6 +282,7 @@ class BagSource : public core::FrameSource {
   BagSourceOptions options_;
   std::unique_ptr<BagMessages> messages_;
   std::string salvage_note_;
+  std::string unreadable_;  // a topic in an encoding tessera does not read: the stream ends
   RosTopics topics_;
   core::Intrinsics intrinsics_;
   std::optional<core::ColourCamera> colour_camera_;

@@ -131,6 +131,15 @@ std::string readableColourEncodings() {
   return names;
 }
 
+bool readsDepthEncoding(const std::string& encoding) {
+  return encoding == "16UC1" || encoding == "mono16" || encoding == "32FC1";
+}
+
+bool readsColourEncoding(const std::string& encoding) {
+  return std::any_of(std::begin(kColourLayouts), std::end(kColourLayouts),
+                     [&](const ColourLayout& layout) { return encoding == layout.encoding; });
+}
+
 cv::Mat depthFromImage(const sensor_msgs::Image& image) {
   if (image.encoding == "16UC1" || image.encoding == "mono16") {
     cv::Mat depth = wrap(image, CV_16UC1).clone();

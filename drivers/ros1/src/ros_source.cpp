@@ -84,6 +84,10 @@ class RosSource : public core::FrameSource {
     captured.arrival_ns = core::steadyNowNs();
     captured.stamp = static_cast<std::int64_t>(message->header.stamp.toNSec());
     captured.device_index = static_cast<int>(message->header.seq);
+    if (!readsDepthEncoding(message->encoding)) {
+      unreadable(options_.topics.depth, message->encoding, "depth", "16UC1, mono16, 32FC1");
+      return;
+    }
     try {
       captured.image = depthFromImage(*message);
     } catch (const core::SourceError& e) {
@@ -106,6 +110,10 @@ class RosSource : public core::FrameSource {
     core::CapturedImage captured;
     captured.arrival_ns = core::steadyNowNs();
     captured.stamp = static_cast<std::int64_t>(message->header.stamp.toNSec());
+    if (!readsColourEncoding(message->encoding)) {
+      unreadable(options_.topics.colour, message->encoding, "colour", readableColourEncodings());
+      return;
+    }
     try {
       captured.image = colourFromImage(*message);
     } catch (const core::SourceError& e) {
@@ -126,6 +134,16 @@ class RosSource : public core::FrameSource {
     colour_info_intrinsics_ = intrinsicsFromCameraInfo(*message);
   }
 
+  // A topic in an encoding tessera does not read: the stream ends with one error.
+  void unreadable(const std::string& topic, const std::string& encoding, const char* role,
+                  const std::string& readable) {
+    std::lock_guard lock(inbox_.mutex);
+    if (!unreadable_.empty()) return;
+    unreadable_ = fmt::format("{}: {} is in encoding '{}', which tessera does not read as {} ({})",
+                              label_, topic, encoding, role, readable);
+    inbox_.changed.notify_all();
+  }
+
   void warnOnce(const std::string& problem) {
     std::lock_guard lock(warned_mutex_);
     if (warned_.insert(problem).second) spdlog::warn("{}", problem);
@@ -144,7 +162,7 @@ class RosSource : public core::FrameSource {
         std::chrono::steady_clock::now() +
         std::chrono::milliseconds(static_cast<std::int64_t>(options_.reconnect_timeout_s * 1000));
     std::unique_lock lock(inbox_.mutex);
-    while (inbox_.depth.empty()) {
+    while (inbox_.depth.empty() && unreadable_.empty()) {
       if (stopRequested() || std::chrono::steady_clock::now() >= deadline) return false;
       inbox_.changed.wait_for(lock, std::chrono::milliseconds(100));
     }
@@ -163,9 +181,14 @@ class RosSource : public core::FrameSource {
     const auto give_up =
         std::chrono::steady_clock::now() + std::chrono::milliseconds(options_.frame_timeout_ms);
     while (!inbox_.changed.wait_for(lock, std::chrono::milliseconds(100), [&] {
-      return !inbox_.depth.empty();
+      return !inbox_.depth.empty() || !unreadable_.empty();
     }) && std::chrono::steady_clock::now() < give_up) {
       if (stopRequested()) return result;  // the user ended the run
+    }
+    if (!unreadable_.empty()) {
+      ended_ = true;
+      result.problem = unreadable_;
+      return result;
     }
     if (inbox_.depth.empty()) {
       ++stats_.device_losses;
@@ -232,6 +255,7 @@ class RosSource : public core::FrameSource {
   // Guarded by inbox_.mutex:
   std::optional<std::uint32_t> last_seq_;
   std::optional<core::Intrinsics> depth_info_, colour_info_intrinsics_;
+  std::string unreadable_;  // set once: a topic in an encoding tessera does not read
   // The reader's own:
   core::LiveStats stats_;
   std::size_t frames_out_ = 0;

@@ -17,6 +17,11 @@ namespace tessera::drivers::ros1 {
 // The colour encodings colourFromImage() reads, comma-separated, for messages and --help.
 std::string readableColourEncodings();
 
+// Whether depthFromImage() / colourFromImage() read images in `encoding`: a topic in another
+// one is of no use, which is worth one error rather than a skipped frame per image.
+bool readsDepthEncoding(const std::string& encoding);
+bool readsColourEncoding(const std::string& encoding);
+
 // CV_16UC1 millimetres (0 = no depth). 32FC1 metres are rounded to millimetres; NaN, infinite,
 // non-positive and beyond-range values become 0. Throws core::SourceError naming the
 // encoding when it is not a depth encoding or the data is shorter than the header says.
