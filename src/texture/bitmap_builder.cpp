@@ -7,10 +7,10 @@
 #include <numeric>
 #include <vector>
 
-#include <open3d/geometry/KDTreeFlann.h>
 #include <opencv2/imgproc.hpp>
 #include <opencv2/photo.hpp>
 
+#include "internal/sample_buckets.h"
 #include "tessera/core/error.h"
 
 namespace tessera::texture {
@@ -195,21 +195,22 @@ PatchBitmap buildBitmap(const planes::PatchSnapshot& patch, const BitmapConfig& 
     bitmap.seam_step = composite.seam_step;
     bitmap.seam_step_levelled = composite.seam_step_levelled;
   } else if (!samples.empty()) {
-    Eigen::MatrixXd positions(2, static_cast<Eigen::Index>(samples.size()));
-    for (std::size_t i = 0; i < samples.size(); ++i) {
-      positions.col(static_cast<Eigen::Index>(i)) << samples[i].u, samples[i].v;
-    }
-    // The tree searches `positions` in place (Open3D 0.16): it must outlive the tree.
-    const open3d::geometry::KDTreeFlann tree(positions);
-    const double t = bitmap.grid.texel_m;
+    const TexelGrid& grid = bitmap.grid;
+    const double t = grid.texel_m;
     const double radius = config.radius_texels * t;
     const double two_sigma2 = 2.0 * std::pow(config.sigma_texels * t, 2);
-    Eigen::VectorXd query(2);
+    // The rectangle of (u, v) the texel centres lie in.
+    Eigen::Vector2d low = grid.origin_uv, high = grid.origin_uv;
+    for (const Eigen::Vector2d& corner : {grid.uvOf(grid.width, 0), grid.uvOf(0, grid.height),
+                                          grid.uvOf(grid.width, grid.height)}) {
+      low = low.cwiseMin(corner);
+      high = high.cwiseMax(corner);
+    }
+    SampleBuckets buckets(samples, radius, low, high);
     std::vector<int> indices;
     std::vector<double> distance2;
-    forEachTexel(bitmap.grid, [&](int r, int c, const Eigen::Vector2d& uv) {
-      query = uv;
-      if (tree.SearchHybrid(query, radius, config.neighbours, indices, distance2) <= 0) return;
+    forEachTexel(grid, [&](int r, int c, const Eigen::Vector2d& uv) {
+      if (buckets.nearest(uv, config.neighbours, indices, distance2) <= 0) return;
       setObserved(bitmap, r, c,
                   texelColour(samples, indices, distance2, two_sigma2, config.best_view));
     });

@@ -46,7 +46,7 @@ void addRandomSamples(planes::PatchSnapshot& patch, double width_m, double heigh
   }
 }
 
-TEST(BitmapBuilder, KdTreeAveragingMatchesTheBruteForceReference) {
+TEST(BitmapBuilder, BucketedAveragingMatchesTheBruteForceReference) {
   planes::PatchSnapshot patch = rectanglePatch(0.2, 0.15);
   addRandomSamples(patch, 0.2, 0.15, 42);
   BitmapConfig config;
@@ -66,6 +66,37 @@ TEST(BitmapBuilder, KdTreeAveragingMatchesTheBruteForceReference) {
     cv::minMaxLoc(difference.reshape(1), nullptr, &worst);
     EXPECT_LE(worst, 1.0) << "best_view " << best_view;  // rounding of the weighted mean only
   }
+}
+
+// Few samples over a large patch (the index widens its buckets), some outside the outline.
+TEST(BitmapBuilder, SparseSamplesFindTheSameNeighboursAsTheBruteForceReference) {
+  planes::PatchSnapshot patch = rectanglePatch(10.0, 8.0);
+  std::mt19937 random(3);
+  std::uniform_real_distribution<double> u_at(-0.5, 10.5), v_at(-0.5, 8.5);
+  for (int i = 0; i < 600; ++i) {
+    ColourSample s;
+    s.u = static_cast<float>(u_at(random));
+    s.v = static_cast<float>(v_at(random));
+    const cv::Vec3b colour = fieldAt(s.u, s.v);
+    s.rgb = {colour[0], colour[1], colour[2]};
+    s.score = static_cast<float>(i % 5) * -0.5F;
+    patch.samples.push_back(s);
+  }
+  BitmapConfig config;
+  config.texel_m = 0.1;
+  config.neighbours = 2;  // fewer than the samples in reach: the nearest must be the ones taken
+  config.max_inpaint_texels = 0;
+  const PatchBitmap fast = buildBitmap(patch, config);
+  const PatchBitmap slow = buildBitmapBruteForce(patch, config);
+  EXPECT_GT(fast.observed, fast.grid.texels() / 5);
+  EXPECT_LT(fast.observed, fast.grid.texels());
+  EXPECT_EQ(fast.observed, slow.observed);
+  EXPECT_EQ(cv::countNonZero(fast.state != slow.state), 0);
+  cv::Mat difference;
+  cv::absdiff(fast.image, slow.image, difference);
+  double worst = 0.0;
+  cv::minMaxLoc(difference.reshape(1), nullptr, &worst);
+  EXPECT_LE(worst, 1.0);
 }
 
 TEST(BitmapBuilder, ASmoothFieldIsReproducedAtTheTexelCentres) {

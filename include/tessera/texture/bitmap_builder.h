@@ -1,8 +1,8 @@
 #pragma once
 // The initial bitmap of a finalized patch: each texel of its TexelGrid gets the weighted mean
-// colour of the nearest colour samples around its centre (a KD-tree over the samples finds
-// them). Texels without samples stay uncoloured and masked; small holes inside the outline
-// may be inpainted from their surroundings and are marked so.
+// colour of the nearest colour samples around its centre (the samples binned into buckets of
+// the search radius find them). Texels without samples stay uncoloured and masked; small holes
+// inside the outline may be inpainted from their surroundings and are marked so.
 #include <cstddef>
 #include <string>
 

@@ -1,0 +1,88 @@
+#include "internal/sample_buckets.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace tessera::texture {
+
+namespace {
+
+// At most this many buckets per sample kept: a few samples spread far apart get wider buckets
+// rather than a huge empty index.
+constexpr double kBucketsPerSample = 4.0;
+
+}  // namespace
+
+SampleBuckets::SampleBuckets(const std::vector<planes::ColourSample>& samples, double radius,
+                             const Eigen::Vector2d& low, const Eigen::Vector2d& high)
+    : radius2_(radius * radius) {
+  std::vector<int> kept;
+  kept.reserve(samples.size());
+  positions_.reserve(samples.size());
+  for (std::size_t i = 0; i < samples.size(); ++i) {
+    positions_.emplace_back(samples[i].u, samples[i].v);
+    const Eigen::Vector2d& p = positions_.back();
+    if ((p.array() >= low.array() - radius).all() && (p.array() <= high.array() + radius).all()) {
+      kept.push_back(static_cast<int>(i));
+    }
+  }
+  origin_ = low.array() - radius;
+  const Eigen::Vector2d extent = (high - low).array() + 2.0 * radius;
+  side_ = std::max(radius, 1e-9);
+  const double most = std::max(1.0, kBucketsPerSample * static_cast<double>(kept.size()));
+  if (extent.x() * extent.y() / (side_ * side_) > most) {
+    side_ = std::sqrt(extent.x() * extent.y() / most);
+  }
+  columns_ = static_cast<long>(std::floor(extent.x() / side_)) + 1;
+  rows_ = static_cast<long>(std::floor(extent.y() / side_)) + 1;
+
+  // Counting sort of the kept samples by bucket, in index order within a bucket.
+  auto bucketOf = [&](const Eigen::Vector2d& p) {
+    const long x = std::clamp(static_cast<long>((p.x() - origin_.x()) / side_), 0L, columns_ - 1);
+    const long y = std::clamp(static_cast<long>((p.y() - origin_.y()) / side_), 0L, rows_ - 1);
+    return static_cast<std::size_t>(y * columns_ + x);
+  };
+  first_.assign(static_cast<std::size_t>(columns_ * rows_) + 1, 0);
+  for (int i : kept) ++first_[bucketOf(positions_[static_cast<std::size_t>(i)]) + 1];
+  for (std::size_t b = 1; b < first_.size(); ++b) first_[b] += first_[b - 1];
+  order_.resize(kept.size());
+  std::vector<std::uint32_t> next(first_.begin(), first_.end() - 1);
+  for (int i : kept) order_[next[bucketOf(positions_[static_cast<std::size_t>(i)])]++] = i;
+}
+
+int SampleBuckets::nearest(const Eigen::Vector2d& uv, int max_count, std::vector<int>& indices,
+                           std::vector<double>& distance2) {
+  indices.clear();
+  distance2.clear();
+  found_.clear();
+  const double radius = std::sqrt(radius2_);
+  const long x0 =
+      std::max(0L, static_cast<long>(std::floor((uv.x() - radius - origin_.x()) / side_)));
+  const long y0 =
+      std::max(0L, static_cast<long>(std::floor((uv.y() - radius - origin_.y()) / side_)));
+  const long x1 = std::min(columns_ - 1,
+                           static_cast<long>(std::floor((uv.x() + radius - origin_.x()) / side_)));
+  const long y1 =
+      std::min(rows_ - 1, static_cast<long>(std::floor((uv.y() + radius - origin_.y()) / side_)));
+  for (long y = y0; y <= y1; ++y) {
+    for (long x = x0; x <= x1; ++x) {
+      const auto b = static_cast<std::size_t>(y * columns_ + x);
+      for (std::uint32_t k = first_[b]; k < first_[b + 1]; ++k) {
+        const int i = order_[k];
+        const Eigen::Vector2d& p = positions_[static_cast<std::size_t>(i)];
+        const double du = p.x() - uv.x(), dv = p.y() - uv.y();
+        const double d2 = du * du + dv * dv;
+        if (d2 <= radius2_) found_.emplace_back(d2, i);
+      }
+    }
+  }
+  const auto count = std::min(found_.size(), static_cast<std::size_t>(std::max(max_count, 0)));
+  std::partial_sort(found_.begin(), found_.begin() + static_cast<long>(count), found_.end());
+  for (std::size_t j = 0; j < count; ++j) {
+    distance2.push_back(found_[j].first);
+    indices.push_back(found_[j].second);
+  }
+  return static_cast<int>(count);
+}
+
+}  // namespace tessera::texture
