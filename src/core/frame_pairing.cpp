@@ -18,7 +18,12 @@ void PairingInbox::pushDepth(CapturedImage frame, std::size_t missed) {
 }
 
 void PairingInbox::pushColour(CapturedImage frame) {
-  colour.push_back(std::move(frame));
+  // In stamp order (a recorder or a network may hand colour images over out of order, and
+  // pairing drops every image older than the one it takes); in order, this is a push_back.
+  const auto at =
+      std::upper_bound(colour.begin(), colour.end(), frame.stamp,
+                       [](std::int64_t stamp, const CapturedImage& c) { return stamp < c.stamp; });
+  colour.insert(at, std::move(frame));
   while (colour.size() > colour_capacity) colour.pop_front();
   changed.notify_all();
 }

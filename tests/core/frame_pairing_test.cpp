@@ -1,6 +1,7 @@
 // The depth/colour inbox the live sources share: a busy reader loses the oldest depth frames
 // (counted), each depth frame takes the colour frame nearest in time within the tolerance,
-// older colour frames go with it, and a colour frame still on its way is waited for.
+// older colour frames go with it, colour frames are kept in stamp order, and a colour frame
+// still on its way is waited for.
 #include "tessera/core/frame_pairing.h"
 
 #include <thread>
@@ -40,6 +41,22 @@ TEST(PairingInbox, TakesTheNearestColourWithinToleranceAndDropsOlderOnes) {
   // Nothing within 16 of 140: no pair, and the queue keeps what it has.
   EXPECT_FALSE(inbox.takeColourNear(lock, 140, 16, std::chrono::microseconds(0)));
   EXPECT_EQ(inbox.colour.size(), 1u);
+}
+
+TEST(PairingInbox, KeepsColourFramesHandedOverOutOfOrderInStampOrder) {
+  PairingInbox inbox;
+  inbox.colour_capacity = 3;
+  for (std::int64_t t : {0, 66, 33, 99}) inbox.pushColour(at(t));  // 0 leaves: capacity 3
+  ASSERT_EQ(inbox.colour.size(), 3u);
+  EXPECT_EQ(inbox.colour[0].stamp, 33);
+  EXPECT_EQ(inbox.colour[1].stamp, 66);
+  EXPECT_EQ(inbox.colour[2].stamp, 99);
+  // The late 33 pairs with a depth frame at 35 and leaves 66 and 99 for the frames after it.
+  std::unique_lock lock(inbox.mutex);
+  const auto colour = inbox.takeColourNear(lock, 35, 16, std::chrono::microseconds(0));
+  ASSERT_TRUE(colour);
+  EXPECT_EQ(colour->stamp, 33);
+  EXPECT_EQ(inbox.colour.size(), 2u);
 }
 
 TEST(PairingInbox, WaitsForAColourFrameStillOnItsWay) {

@@ -203,15 +203,8 @@ class BagSource : public core::FrameSource {
         pending_depth_.push_back(std::move(captured));
       } else {
         captured.image = colourFromImage(image);
-        // Kept in stamp order: a recorder may receive colour images out of order, and pairing
-        // drops every image older than the one it takes.
-        std::lock_guard lock(inbox_.mutex);
-        auto& queue = inbox_.colour;
-        const auto at = std::upper_bound(
-            queue.begin(), queue.end(), captured.stamp,
-            [](std::int64_t stamp, const core::CapturedImage& c) { return stamp < c.stamp; });
-        queue.insert(at, std::move(captured));
-        if (queue.size() > inbox_.colour_capacity) queue.pop_front();
+        std::lock_guard lock(inbox_.mutex);  // the inbox's rule; this source has one thread
+        inbox_.pushColour(std::move(captured));
       }
       return std::nullopt;
     } catch (const core::SourceError& e) {

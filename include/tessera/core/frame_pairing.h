@@ -39,6 +39,7 @@ struct PairingInbox {
   // Under `mutex`, and notifying the reader: a depth frame, after `missed` ones the device
   // sent that never arrived; the oldest held beyond capacity are dropped.
   void pushDepth(CapturedImage frame, std::size_t missed = 0);
+  // The same for a colour frame, kept in stamp order among those held.
   void pushColour(CapturedImage frame);
   // Empties the queues for a new connection (the counts stay).
   void clearFrames();
