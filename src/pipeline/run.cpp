@@ -23,16 +23,21 @@ void createOutputDir(const std::filesystem::path& dir) {
   }
 }
 
-// The map's files as `tessera run` writes them (docs/CLI.md), those that exist.
-std::vector<std::filesystem::path> exportedFiles(const std::filesystem::path& out_dir) {
-  std::vector<std::filesystem::path> files;
-  for (const char* name : {"map.glb", "map.obj", "patches.obj", "patches.json", "mesh.ply",
-                           "textures.db", "trajectory.txt", "report.json"}) {
+// What the run wrote besides the map itself: the trajectories, the report and a database file
+// (not a server), as absolute paths.
+void addRunFiles(std::vector<std::filesystem::path>& files, const std::filesystem::path& out_dir,
+                 const std::string& database_location) {
+  for (const std::filesystem::path& file :
+       {out_dir / "trajectory.txt", out_dir / "trajectory_closed.txt", out_dir / "report.json",
+        std::filesystem::path(database_location)}) {
     std::error_code ec;
-    const std::filesystem::path file = std::filesystem::absolute(out_dir / name, ec);
-    if (!ec && std::filesystem::exists(file, ec)) files.push_back(file);
+    if (std::filesystem::is_regular_file(file, ec)) files.push_back(file);
   }
-  return files;
+  for (std::filesystem::path& file : files) {
+    std::error_code ec;
+    const std::filesystem::path absolute = std::filesystem::absolute(file, ec);
+    if (!ec) file = absolute;
+  }
 }
 
 }  // namespace
@@ -54,7 +59,7 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
   const double cpu_graph_done_s = core::processCpuSeconds();
 
   RunSummary summary = internal::summariseRun(parts, options, wall_s);
-  internal::exportRun(parts, options, summary);
+  std::vector<std::filesystem::path> files = internal::exportRun(parts, options, summary);
   summary.peak_rss_mb = peakRssMb();
   summary.cpu.stream_s = summary.stream.cpu_stream_s;
   summary.cpu.elapsed_stream_s = summary.stream.elapsed_stream_s;
@@ -63,7 +68,10 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
   summary.cpu.finish_s = core::processCpuSeconds() - cpu_graph_done_s;
   writeReport(summary, options.out_dir / "report.json");
   if (options.monitor != nullptr) options.monitor->finish(reportJson(summary));
-  if (options.listener != nullptr) options.listener->onExported(exportedFiles(options.out_dir));
+  if (options.listener != nullptr) {
+    addRunFiles(files, options.out_dir, summary.database.location);
+    options.listener->onExported(files);
+  }
   return summary;
 }
 

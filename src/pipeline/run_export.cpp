@@ -97,11 +97,14 @@ fusion::SurfaceMesh finalMesh(RunParts& parts, LoopFigures& loops) {
 
 }  // namespace
 
-void exportRun(RunParts& parts, const RunOptions& options, RunSummary& summary) {
+std::vector<std::filesystem::path> exportRun(RunParts& parts, const RunOptions& options,
+                                             RunSummary& summary) {
+  std::vector<std::filesystem::path> written;
+  const auto file = [&](const char* name) { return written.emplace_back(options.out_dir / name); };
   // The mesh is written even when the source ended abnormally, so work is kept.
   const auto mesh = finalMesh(parts, summary.loops);
   summary.exported.mesh_vertices = mesh.vertices.size();
-  fusion::writePly(mesh, options.out_dir / "mesh.ply");
+  fusion::writePly(mesh, file("mesh.ply"));
   const planes::PatchMap& patches = parts.planes.map();
   std::error_code ignored;
   std::filesystem::remove_all(parts.sample_dir, ignored);
@@ -125,14 +128,15 @@ void exportRun(RunParts& parts, const RunOptions& options, RunSummary& summary) 
   if (parts.bitmaps.areaBuiltM2() > 0.0) {
     bitmaps.ms_per_m2 = parts.bitmaps.timer().totalMs() / parts.bitmaps.areaBuiltM2();
   }
-  map_export::writePatchesObj(patches, options.out_dir / "patches.obj", textures);
+  map_export::writePatchesObj(patches, file("patches.obj"), textures);
   // The map users open: patches triangulated with their holes, one material per texture.
   const map_export::MapModel map_model =
       map_export::buildMapModel(patches, textures, options.residual ? &mesh : nullptr);
-  map_export::writeMapObj(map_model, options.out_dir / "map.obj");
-  map_export::writeMapGlb(map_model, options.out_dir, options.out_dir / "map.glb");
+  map_export::writeMapObj(map_model, file("map.obj"));
+  map_export::writeMapGlb(map_model, options.out_dir, file("map.glb"));
   summary.exported.map_triangles = map_model.triangleCount();
-  map_export::writePatchesJson(patches, options.out_dir / "patches.json", textures);
+  map_export::writePatchesJson(patches, file("patches.json"), textures);
+  return written;
 }
 
 }  // namespace tessera::pipeline::internal

@@ -1,4 +1,5 @@
 #include <fstream>
+#include <set>
 #include <sstream>
 
 #include <gtest/gtest.h>
@@ -14,6 +15,7 @@
 #include "tessera/drivers/oni/oni_source.h"
 #include "tessera/eval/run_evaluation.h"
 #include "tessera/pipeline/run.h"
+#include "tessera/pipeline/run_listener.h"
 #include "tessera/pipeline/texture_db_stages.h"
 
 namespace tessera::pipeline {
@@ -106,11 +108,23 @@ void expectTexturedPatches(const fs::path& out, const RunSummary& summary) {
   EXPECT_NE(mtl_text.find("map_Kd -clamp on textures/texture_"), std::string::npos);
 }
 
+// Keeps what a run tells its listener at the end.
+class ExportedFiles : public RunListener {
+ public:
+  void onPose(std::int64_t, const core::Isometry&) override {}
+  void onPatch(const PatchSurface&) override {}
+  void onPatchRetired(int) override {}
+  void onExported(const std::vector<fs::path>& written) override { files = written; }
+  std::vector<fs::path> files;
+};
+
 TEST(Pipeline, RunsEveryGoodFrameAndWritesTheOutputs) {
   const fs::path out = test::freshTempDir();
   ScriptedSource source(8, {3});
   RunOptions options;
   options.out_dir = out;
+  ExportedFiles listener;
+  options.listener = &listener;
   options.threads = 2;
   options.poses = PoseSource::kGroundTruth;  // so trajectory.txt holds the known poses
   std::size_t progress_calls = 0;
@@ -131,6 +145,16 @@ TEST(Pipeline, RunsEveryGoodFrameAndWritesTheOutputs) {
   EXPECT_FALSE(summary.stream.rss_growth_mb_per_1000_frames);  // too few frames to say
   EXPECT_GT(summary.exported.mesh_vertices, 1000u);
   EXPECT_TRUE(fs::is_regular_file(out / "mesh.ply"));
+  // The listener hears of every file the run wrote, each as an absolute path to a file.
+  std::set<std::string> names;
+  for (const fs::path& file : listener.files) {
+    EXPECT_TRUE(file.is_absolute()) << file;
+    EXPECT_TRUE(fs::is_regular_file(file)) << file;
+    names.insert(file.filename().string());
+  }
+  EXPECT_EQ(names,
+            (std::set<std::string>{"mesh.ply", "patches.obj", "map.obj", "map.glb", "patches.json",
+                                   "trajectory.txt", "report.json", "textures.db"}));
 
   // stats.jsonl: one line per frame, then the patches finalized at the end of the stream, each
   // committed to the database, and the prefilter's line for that batch.

@@ -45,7 +45,9 @@ struct RunParts {
 RunSummary summariseRun(RunParts& parts, const RunOptions& options, double wall_s);
 
 // Writes the map: OUT/mesh.ply, the bitmaps still in memory, the database textures the map
-// shows, patches.obj/json, map.obj and map.glb; adds their figures to `summary`.
-void exportRun(RunParts& parts, const RunOptions& options, RunSummary& summary);
+// shows, patches.obj/json, map.obj and map.glb; adds their figures to `summary`. Returns the
+// map's files (mesh, patches and map models), not the textures they name.
+std::vector<std::filesystem::path> exportRun(RunParts& parts, const RunOptions& options,
+                                             RunSummary& summary);
 
 }  // namespace tessera::pipeline::internal
