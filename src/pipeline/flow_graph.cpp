@@ -7,6 +7,8 @@
 #include <oneapi/tbb/flow_graph.h>
 #include <oneapi/tbb/task_arena.h>
 
+#include "internal/background_workers.h"
+
 namespace tessera::pipeline {
 
 namespace flow = oneapi::tbb::flow;
@@ -54,6 +56,16 @@ class PatchJobs {
   std::size_t next_sequence_ = 0, next_batch_ = 0;
 };
 
+// Tells the graph that an async node's job is done (however it ended), so that
+// wait_for_all does not wait for it any more.
+template <class Gateway>
+struct ReleaseWait {
+  Gateway& gateway;
+  ~ReleaseWait() { gateway.release_wait(); }
+};
+template <class Gateway>
+ReleaseWait(Gateway&) -> ReleaseWait<Gateway>;
+
 }  // namespace
 
 int defaultThreadCount() {
@@ -66,6 +78,9 @@ std::size_t runGraph(FramePath& frames, PatchPath& patches, RunReport& report,
   const int threads = options.threads > 0 ? options.threads : defaultThreadCount();
   std::size_t frames_reported = 0;  // frames of the stream, interruption markers aside
   oneapi::tbb::task_arena arena(threads);
+  // Declared before the graph that hands them work, so that they outlive it.
+  internal::BackgroundWorkers describers(threads, options.texture_nice);
+  internal::BackgroundWorkers committer(1, options.texture_nice);
   arena.execute([&] {
     flow::graph graph;
 
@@ -121,19 +136,32 @@ std::size_t runGraph(FramePath& frames, PatchPath& patches, RunReport& report,
           }
           std::get<0>(out).try_put(std::move(fused));
         });
-    // Bitmaps are built and described independently: as many at once as there are free
-    // threads, off the frame path. They are committed one at a time, in finalization order.
-    flow::function_node<PatchJob, DescribedPatch> describe_node(
-        graph, flow::unlimited, [&](const PatchJob& job) { return patches.describe(job); });
+    // Bitmaps are built and described independently: as many at once as there are threads,
+    // off the frame path. They are committed one at a time, in finalization order. Both run
+    // on threads of their own at a lower priority (internal/background_workers.h), handed
+    // over by async nodes.
+    using DescribeNode = flow::async_node<PatchJob, DescribedPatch>;
+    DescribeNode describe_node(graph, flow::unlimited,
+                               [&](const PatchJob& job, DescribeNode::gateway_type& gateway) {
+                                 gateway.reserve_wait();
+                                 describers.submit([&patches, &gateway, job] {
+                                   const ReleaseWait release{gateway};
+                                   gateway.try_put(patches.describe(job));
+                                 });
+                               });
     flow::sequencer_node<DescribedPatch> in_order(
         graph, [](const DescribedPatch& described) { return described.sequence; });
-    using CommitNode = flow::multifunction_node<DescribedPatch, std::tuple<CommitMessage>>;
-    CommitNode commit_node(graph, flow::serial,
-                           [&](DescribedPatch described, CommitNode::output_ports_type& out) {
-                             if (auto message = patches.commit(std::move(described))) {
-                               std::get<0>(out).try_put(std::move(*message));
-                             }
-                           });
+    using CommitNode = flow::async_node<DescribedPatch, CommitMessage>;
+    CommitNode commit_node(
+        graph, flow::serial, [&](DescribedPatch described, CommitNode::gateway_type& gateway) {
+          gateway.reserve_wait();
+          committer.submit([&patches, &gateway, described = std::move(described)]() mutable {
+            const ReleaseWait release{gateway};
+            if (auto message = patches.commit(std::move(described))) {
+              gateway.try_put(std::move(*message));
+            }
+          });
+        });
     // Frames (in stream order) and commits (in finalization order) meet at the one node that
     // writes the report; a reported frame lets the source read another.
     flow::sequencer_node<Numbered<FusedFrame>> to_report(graph, numbered);
@@ -168,7 +196,7 @@ std::size_t runGraph(FramePath& frames, PatchPath& patches, RunReport& report,
     flow::make_edge(flow::output_port<1>(planes_node), describe_node);
     flow::make_edge(describe_node, in_order);
     flow::make_edge(in_order, commit_node);
-    flow::make_edge(flow::output_port<0>(commit_node), flow::input_port<1>(report_input));
+    flow::make_edge(commit_node, flow::input_port<1>(report_input));
     flow::make_edge(report_input, report_node);
     flow::make_edge(flow::output_port<0>(report_node), limiter.decrementer());
 
@@ -185,6 +213,8 @@ std::size_t runGraph(FramePath& frames, PatchPath& patches, RunReport& report,
     }
     graph.wait_for_all();
   });
+  describers.rethrowFirst();
+  committer.rethrowFirst();
   return frames_reported;
 }
 

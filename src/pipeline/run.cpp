@@ -49,9 +49,11 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
   createOutputDir(options.out_dir);
   internal::RunParts parts(source, config, options);
   const auto start = std::chrono::steady_clock::now();
+  const PipelineConfig& pipeline = config.pipeline;
+  const bool live = source.isLive();
   runGraph(parts.stages, parts.stages, parts.stages,
-           {options.threads, source.isLive() ? config.pipeline.live_frames_in_flight
-                                             : config.pipeline.max_frames_in_flight});
+           {options.threads, live ? pipeline.live_frames_in_flight : pipeline.max_frames_in_flight,
+            live ? pipeline.texture_nice_live : pipeline.texture_nice_replay});
   parts.sink.flush();
   parts.store->finishRun(parts.run_id);  // a server's store first sends what its journal holds
   const double wall_s =

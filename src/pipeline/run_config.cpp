@@ -9,9 +9,17 @@ namespace tessera::pipeline {
 void readConfig(const core::ConfigSection& section, PipelineConfig& config) {
   section.read("max_frames_in_flight", config.max_frames_in_flight);
   section.read("live_frames_in_flight", config.live_frames_in_flight);
+  section.read("texture_nice_live", config.texture_nice_live);
+  section.read("texture_nice_replay", config.texture_nice_replay);
   if (config.max_frames_in_flight < 1 || config.live_frames_in_flight < 1) {
     throw core::ConfigError(
         "pipeline: max_frames_in_flight and live_frames_in_flight must be at least 1");
+  }
+  for (const int nice : {config.texture_nice_live, config.texture_nice_replay}) {
+    if (nice < 0 || nice > 19) {
+      throw core::ConfigError(
+          "pipeline: texture_nice_live and texture_nice_replay must be 0 to 19");
+    }
   }
 }
 

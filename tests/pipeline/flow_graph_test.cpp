@@ -2,7 +2,8 @@
 // the frames in stream order, patches are committed in the order they were finalized (the
 // end-of-stream patches last), each batch's commits all reach the report, the report is never
 // called by two threads at once, and no more frames are in flight than the limiter allows;
-// for 1, 2 and 4 threads.
+// texturing runs at a lower priority than the frame path, and a failure to describe a patch
+// ends the run with its error; for 1, 2 and 4 threads.
 #include "tessera/pipeline/flow_graph.h"
 
 #include <atomic>
@@ -12,10 +13,17 @@
 #include <random>
 #include <thread>
 
+#include <sys/resource.h>
+#include <sys/syscall.h>
+#include <unistd.h>
+
 #include <gtest/gtest.h>
 
 namespace tessera::pipeline {
 namespace {
+
+// The calling thread's own nice value.
+int threadNice() { return ::getpriority(PRIO_PROCESS, static_cast<id_t>(::syscall(SYS_gettid))); }
 
 // Sleeps up to `max_us`, drawn from `random`.
 void nap(std::mt19937& random, int max_us) {
@@ -48,6 +56,7 @@ class FakeFrames : public FramePath {
   }
   TrackedFrame track(core::Frame frame) override {
     nap(track_random_, 800);
+    track_nice = threadNice();
     out_of_order += frame.index != tracked_++ ? 1 : 0;
     TrackedFrame tracked;
     tracked.frame = std::move(frame);
@@ -95,7 +104,7 @@ class FakeFrames : public FramePath {
     return events;
   }
 
-  std::atomic<int> in_flight{0}, max_in_flight{0}, out_of_order{0};
+  std::atomic<int> in_flight{0}, max_in_flight{0}, out_of_order{0}, track_nice{-100};
   std::vector<int> finalization_order;  // patch ids; a retirement as -id
   std::map<int, std::uint64_t> batch_of_patch;
 
@@ -111,6 +120,8 @@ class FakePatches : public PatchPath {
   DescribedPatch describe(const PatchJob& job) const override {
     std::mt19937 random(static_cast<unsigned>(job.sequence) + 7);
     nap(random, 3000);  // many at once, finishing out of order
+    describe_nice = threadNice();
+    if (job.patch.id == fail_on_patch) throw std::runtime_error("describe failed");
     DescribedPatch described;
     described.sequence = job.sequence;
     described.retired = job.retired;
@@ -124,6 +135,7 @@ class FakePatches : public PatchPath {
     return described;
   }
   std::optional<CommitMessage> commit(DescribedPatch described) override {
+    commit_nice = threadNice();
     out_of_order += described.sequence != committed_++ ? 1 : 0;
     if (described.retired) {
       commit_order.push_back(-*described.retired);
@@ -138,6 +150,9 @@ class FakePatches : public PatchPath {
 
   std::atomic<int> out_of_order{0};
   std::vector<int> commit_order;
+  mutable std::atomic<int> describe_nice{-100};
+  std::atomic<int> commit_nice{-100};
+  int fail_on_patch = -1;
 
  private:
   std::size_t committed_ = 0;
@@ -195,7 +210,8 @@ TEST_P(FlowGraphTest, KeepsOrderBatchesAndBackPressureAndFlushesAtTheEnd) {
   FakeFrames frames;
   FakePatches patches;
   FakeReport report(frames);
-  const std::size_t reported = runGraph(frames, patches, report, {GetParam(), kInFlight});
+  const int nice = threadNice();
+  const std::size_t reported = runGraph(frames, patches, report, {GetParam(), kInFlight, 5});
 
   EXPECT_EQ(reported, static_cast<std::size_t>(kFrames));
   EXPECT_EQ(frames.out_of_order, 0) << "a serial frame stage saw frames out of order";
@@ -226,6 +242,19 @@ TEST_P(FlowGraphTest, KeepsOrderBatchesAndBackPressureAndFlushesAtTheEnd) {
   ASSERT_FALSE(report.batches.empty());
   EXPECT_EQ(report.batches.rbegin()->second.frame_index, static_cast<std::uint64_t>(kFrames));
   EXPECT_EQ(report.batches.rbegin()->second.size, 3u);
+
+  // Texturing runs at a lower priority than the frame path.
+  EXPECT_EQ(frames.track_nice, nice);
+  EXPECT_EQ(patches.describe_nice, std::min(19, nice + 5));
+  EXPECT_EQ(patches.commit_nice, std::min(19, nice + 5));
+}
+
+TEST(FlowGraph, AFailureToDescribeAPatchEndsTheRunWithItsError) {
+  FakeFrames frames;
+  FakePatches patches;
+  patches.fail_on_patch = 2;
+  FakeReport report(frames);
+  EXPECT_THROW(runGraph(frames, patches, report, {2, kInFlight, 5}), std::runtime_error);
 }
 
 INSTANTIATE_TEST_SUITE_P(Threads, FlowGraphTest, ::testing::Values(1, 2, 4),

@@ -67,6 +67,10 @@ class RunReport {
 struct GraphOptions {
   int threads = 0;               // 0: hardware threads
   int max_frames_in_flight = 4;  // replay back-pressure (limiter_node)
+  // How far the nice value of the threads that describe and commit patches is raised above
+  // the caller's (0: not at all): with the cores short, the frame path goes first and
+  // texturing waits.
+  int texture_nice = 0;
 };
 
 // Runs the stages over the whole stream, then finishes the patches (end of stream) and waits

@@ -21,6 +21,11 @@ struct PipelineConfig {
   // Live sources: frames in the pipeline at once. The device does not wait: while this many
   // are in flight its newer frames queue (OpenNi2Options::queue_frames) and the oldest drop.
   int live_frames_in_flight = 2;
+  // How far (0 to 19) the nice value of the threads that describe and commit finalized
+  // patches is raised above the process's, for live sources and for replay: with the cores
+  // short, the frame path runs first and texturing waits for a free core; 0: not at all.
+  int texture_nice_live = 10;
+  int texture_nice_replay = 0;
 };
 
 void readConfig(const core::ConfigSection& section, PipelineConfig& config);
