@@ -30,6 +30,16 @@ struct RosBus::Topics {
   std::mutex mutex;                                   // guards markers
   std::map<int, visualization_msgs::Marker> markers;  // every patch in the map, by id
 
+  // The marker of patch `id`, stamped now in the map frame; the caller says what it does.
+  visualization_msgs::Marker patchMarker(int id) const {
+    visualization_msgs::Marker marker;
+    marker.header.stamp = ros::Time::now();
+    marker.header.frame_id = map_frame;
+    marker.ns = "tessera_patches";
+    marker.id = id;
+    return marker;
+  }
+
   // A subscriber that joins late (RViz started after the run) gets the whole map at once.
   void sendAll(const ros::SingleSubscriberPublisher& subscriber) {
     visualization_msgs::MarkerArray all;
@@ -93,11 +103,7 @@ void RosBus::publishPose(std::int64_t stamp_ns, const Eigen::Isometry3d& T_map_c
 
 void RosBus::publishPatch(ColouredMesh mesh) {
   Topics& t = *topics_;
-  visualization_msgs::Marker marker;
-  marker.header.stamp = ros::Time::now();
-  marker.header.frame_id = t.map_frame;
-  marker.ns = "tessera_patches";
-  marker.id = mesh.id;
+  visualization_msgs::Marker marker = t.patchMarker(mesh.id);
   marker.type = visualization_msgs::Marker::TRIANGLE_LIST;
   marker.action = visualization_msgs::Marker::ADD;
   marker.pose.orientation.w = 1.0;
@@ -127,11 +133,7 @@ void RosBus::publishPatch(ColouredMesh mesh) {
 
 void RosBus::deletePatch(int id) {
   Topics& t = *topics_;
-  visualization_msgs::Marker marker;
-  marker.header.stamp = ros::Time::now();
-  marker.header.frame_id = t.map_frame;
-  marker.ns = "tessera_patches";
-  marker.id = id;
+  visualization_msgs::Marker marker = t.patchMarker(id);
   marker.action = visualization_msgs::Marker::DELETE;
   {
     std::lock_guard lock(t.mutex);
