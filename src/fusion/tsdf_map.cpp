@@ -126,23 +126,26 @@ void TsdfMap::integrate(const core::Frame& frame, const core::Isometry& T_W_C) {
 
 namespace {
 
-// Appends `mesh` to `into`.
-void append(const o3d::geometry::TriangleMesh& mesh, SurfaceMesh& into) {
+// Appends a mesh's arrays to `into` (its vertex indices shifted past the vertices there).
+void append(const std::vector<Eigen::Vector3d>& vertices,
+            const std::vector<Eigen::Vector3d>& colors,
+            const std::vector<Eigen::Vector3i>& triangles, SurfaceMesh& into) {
   const auto offset = static_cast<int>(into.vertices.size());
-  into.vertices.insert(into.vertices.end(), mesh.vertices_.begin(), mesh.vertices_.end());
-  into.colors.insert(into.colors.end(), mesh.vertex_colors_.begin(), mesh.vertex_colors_.end());
-  for (const Eigen::Vector3i& t : mesh.triangles_) {
+  into.vertices.insert(into.vertices.end(), vertices.begin(), vertices.end());
+  into.colors.insert(into.colors.end(), colors.begin(), colors.end());
+  for (const Eigen::Vector3i& t : triangles) {
     into.triangles.push_back(t + Eigen::Vector3i::Constant(offset));
   }
 }
 
 void append(const SurfaceMesh& mesh, SurfaceMesh& into) {
-  const auto offset = static_cast<int>(into.vertices.size());
-  into.vertices.insert(into.vertices.end(), mesh.vertices.begin(), mesh.vertices.end());
-  into.colors.insert(into.colors.end(), mesh.colors.begin(), mesh.colors.end());
-  for (const Eigen::Vector3i& t : mesh.triangles) {
-    into.triangles.push_back(t + Eigen::Vector3i::Constant(offset));
-  }
+  append(mesh.vertices, mesh.colors, mesh.triangles, into);
+}
+
+// What a kept piece costs: positions and colours, and its triangles.
+std::size_t bytesOf(const SurfaceMesh& piece) {
+  return piece.vertices.size() * 2 * sizeof(Eigen::Vector3d) +
+         piece.triangles.size() * sizeof(Eigen::Vector3i);
 }
 
 using BlockKey = std::array<int, 3>;
@@ -184,7 +187,8 @@ SurfaceMesh TsdfMap::extractMesh() const {
   for (const auto& [key, piece] : released_pieces_) {
     if (units.count(Eigen::Vector3i(key[0], key[1], key[2])) == 0) append(piece, out);
   }
-  append(*volume_->tsdf.ExtractTriangleMesh(), out);
+  const auto live = volume_->tsdf.ExtractTriangleMesh();
+  append(live->vertices_, live->vertex_colors_, live->triangles_, out);
   return out;
 }
 
@@ -222,11 +226,13 @@ std::size_t TsdfMap::releaseBlocksBehind(const core::Isometry& T_W_C, double dis
   for (auto& [key, piece] : piecesByBlock(*released->ExtractTriangleMesh(), block_m)) {
     const Eigen::Vector3i index(key[0], key[1], key[2]);
     SurfaceMesh& kept = released_pieces_[key];
+    released_bytes_ -= bytesOf(kept);
     if (released->volume_units_.count(index) == 0) {
       append(piece, kept);
     } else if (2 * piece.triangles.size() >= kept.triangles.size()) {
       kept = std::move(piece);
     }
+    released_bytes_ += bytesOf(kept);
   }
   return released->volume_units_.size();
 }
@@ -236,15 +242,6 @@ std::size_t TsdfMap::blockCount() const { return volume_->tsdf.volume_units_.siz
 std::size_t TsdfMap::memoryBytes() const {
   const auto r = static_cast<std::size_t>(config_.block_resolution);
   return blockCount() * r * r * r * sizeof(o3d::geometry::TSDFVoxel) + releasedSurfaceBytes();
-}
-
-std::size_t TsdfMap::releasedSurfaceBytes() const {
-  std::size_t bytes = 0;
-  for (const auto& [key, piece] : released_pieces_) {
-    bytes += piece.vertices.size() * 2 * sizeof(Eigen::Vector3d) +
-             piece.triangles.size() * sizeof(Eigen::Vector3i);
-  }
-  return bytes;
 }
 
 void writePly(const SurfaceMesh& mesh, const std::filesystem::path& path) {

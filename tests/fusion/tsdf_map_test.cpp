@@ -128,7 +128,11 @@ TEST(TsdfMap, AWallReleasedLapAfterLapIsKeptOnce) {
     // The same wall: the same pieces, not one more copy a lap.
     EXPECT_EQ(map.releasedPieces(), pieces);
     EXPECT_EQ(map.releasedSurfaceBytes(), bytes);
-    EXPECT_EQ(map.extractMesh().triangles.size(), triangles);
+    const SurfaceMesh mesh = map.extractMesh();
+    EXPECT_EQ(mesh.triangles.size(), triangles);
+    // The bytes kept as pieces are replaced are those of the pieces (nothing is live here).
+    EXPECT_EQ(bytes, mesh.vertices.size() * 2 * sizeof(Eigen::Vector3d) +
+                         mesh.triangles.size() * sizeof(Eigen::Vector3i));
   }
 }
 

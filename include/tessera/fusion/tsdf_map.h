@@ -83,7 +83,7 @@ class TsdfMap {
 
   // Bytes held by allocated voxel blocks and the surface of released ones.
   std::size_t memoryBytes() const;
-  std::size_t releasedSurfaceBytes() const;
+  std::size_t releasedSurfaceBytes() const { return released_bytes_; }
   std::size_t releasedPieces() const { return released_pieces_.size(); }
   std::size_t blockCount() const;
 
@@ -96,6 +96,7 @@ class TsdfMap {
   std::unique_ptr<Volume> volume_;
   // The surface of the released blocks, by block index (Open3D's key of the block).
   std::map<std::array<int, 3>, SurfaceMesh> released_pieces_;
+  std::size_t released_bytes_ = 0;  // of released_pieces_, kept as they change
   int thread_cap_ = 0;            // 0: leave OpenMP's default
 };
 
