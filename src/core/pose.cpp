@@ -25,4 +25,9 @@ double rotationAngleDeg(const Isometry& T) {
   return Eigen::AngleAxisd(T.linear()).angle() * 180.0 / M_PI;
 }
 
+bool posesNear(const Isometry& a, const Isometry& b, double radius_m, double angle_deg) {
+  const Isometry motion = a.inverse() * b;
+  return motion.translation().norm() <= radius_m && rotationAngleDeg(motion) <= angle_deg;
+}
+
 }  // namespace tessera::core

@@ -283,10 +283,8 @@ TrackingResult Tracker::track(const core::Frame& frame, const core::Isometry& in
     const int recent = s.keyframes.front()->id;
     for (const PastKeyframe& past : s.past) {
       if (past.id >= recent) break;
-      if ((past.T_W_C.translation() - T_W_C.translation()).norm() <=
-              config_.relocalisation_cover_radius_m &&
-          core::rotationAngleDeg(past.T_W_C.inverse() * T_W_C) <=
-              config_.relocalisation_cover_angle_deg) {
+      if (core::posesNear(past.T_W_C, T_W_C, config_.relocalisation_cover_radius_m,
+                          config_.relocalisation_cover_angle_deg)) {
         return true;
       }
     }

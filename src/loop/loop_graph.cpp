@@ -229,9 +229,8 @@ bool LoopGraph::coveredByOlder(int query) const {
     // Kept keyframes ascend in travel: the rest are too recent to be a revisit.
     if (travel - older.travel_m < config_.min_travel_m) break;
     if (rootOf(kept) != rootOf(query)) continue;
-    const core::Isometry& there = corrected_[static_cast<std::size_t>(kept)];
-    if ((there.translation() - at.translation()).norm() <= config_.cover_radius_m &&
-        core::rotationAngleDeg(there.inverse() * at) <= config_.cover_angle_deg) {
+    if (core::posesNear(corrected_[static_cast<std::size_t>(kept)], at, config_.cover_radius_m,
+                        config_.cover_angle_deg)) {
       return true;
     }
   }

@@ -16,8 +16,7 @@ namespace {
 // A frame this far from a reference one (5 cm or 3 degrees: a recording of sparse keyframes,
 // dropped frames) is always integrated and always gives colour samples.
 bool farFrom(const core::Isometry& T_W_reference, const core::Isometry& T_W_C) {
-  const core::Isometry motion = T_W_reference.inverse() * T_W_C;
-  return motion.translation().norm() > 0.05 || core::rotationAngleDeg(motion) > 3.0;
+  return !core::posesNear(T_W_reference, T_W_C, 0.05, 3.0);
 }
 
 }  // namespace

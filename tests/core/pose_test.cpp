@@ -25,5 +25,18 @@ TEST(Pose, InterpolatesTranslationLinearlyAndRotationBySlerp) {
   EXPECT_TRUE(interpolate(a, b, 1.0).isApprox(b, 1e-12));
 }
 
+TEST(Pose, PosesAreNearWithinBothBoundsWhereverTheyAre) {
+  // A camera far from the origin and turned: nearness is measured between the two poses.
+  core::Isometry a =
+      isometryFromTranslationQuaternion({5, -3, 2}, 0, std::sin(0.3), 0, std::cos(0.3));
+  core::Isometry b = a;
+  b.translate(Eigen::Vector3d(0.0, 0.0, 0.2));                                 // 20 cm ahead
+  b.rotate(Eigen::AngleAxisd(10.0 * M_PI / 180.0, Eigen::Vector3d::UnitY()));  // 10 degrees
+  EXPECT_TRUE(posesNear(a, b, 0.21, 10.5));
+  EXPECT_TRUE(posesNear(b, a, 0.21, 10.5));
+  EXPECT_FALSE(posesNear(a, b, 0.19, 10.5));  // too far
+  EXPECT_FALSE(posesNear(a, b, 0.21, 9.5));   // turned too far
+}
+
 }  // namespace
 }  // namespace tessera::core

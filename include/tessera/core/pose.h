@@ -19,4 +19,8 @@ Isometry interpolate(const Isometry& a, const Isometry& b, double alpha);
 // The angle of T's rotation, degrees.
 double rotationAngleDeg(const Isometry& T);
 
+// Whether b is within radius_m and angle_deg of a (the motion between them, both bounds
+// inclusive).
+bool posesNear(const Isometry& a, const Isometry& b, double radius_m, double angle_deg);
+
 }  // namespace tessera::core
