@@ -103,7 +103,7 @@ nlohmann::json toJson(const MonitorSnapshot& s) {
   const MonitorCommit& c = s.commits;
   const std::size_t bytes_before = 3 * c.economy.pixels_before;
   const std::size_t bytes_after = 3 * c.economy.pixels_after;
-  nlohmann::json json = {
+  nlohmann::json out = {
       {"state", s.state},
       {"generation", s.generation},
       {"source", s.source},
@@ -139,8 +139,8 @@ nlohmann::json toJson(const MonitorSnapshot& s) {
       {"cpu_s", f.cpu_s},
       {"rss_mb", f.rss_mb},
   };
-  if (!s.report.is_null()) json["report"] = s.report;
-  return json;
+  if (!s.report.is_null()) out["report"] = s.report;
+  return out;
 }
 
 nlohmann::json toJson(const std::vector<HistoryPoint>& history) {

@@ -38,16 +38,16 @@ planes::PatchSnapshot patch(int id) {
   return snapshot;
 }
 
-constexpr int kFrames = 60;
+constexpr int kStreamFrames = 60;
 constexpr int kInFlight = 3;
 
-// Frames 0..kFrames-1. Every third frame finalizes one or two patches; every tenth retires the
-// oldest patch not yet retired. The end of the stream finalizes three more and retires one.
+// Frames 0..kStreamFrames-1. Every third frame finalizes one or two patches; every tenth retires
+// the oldest patch not yet retired. The end of the stream finalizes three more and retires one.
 class FakeFrames : public FramePath {
  public:
   std::optional<core::Frame> next() override {
     nap(source_random_, 300);
-    if (read_ == kFrames) return std::nullopt;
+    if (read_ == kStreamFrames) return std::nullopt;
     core::Frame frame;
     frame.index = static_cast<std::uint64_t>(read_++);
     frame.timestamp_ns = static_cast<std::int64_t>(frame.index) * 33'000'000;
@@ -99,7 +99,7 @@ class FakeFrames : public FramePath {
     for (int i = 0; i < 3; ++i) {
       finalized.push_back(patch(next_id_));
       finalization_order.push_back(next_id_);
-      batch_of_patch[next_id_++] = kFrames;  // the end's batch: after the last frame
+      batch_of_patch[next_id_++] = kStreamFrames;  // the end's batch: after the last frame
     }
     return events;
   }
@@ -213,7 +213,7 @@ TEST_P(FlowGraphTest, KeepsOrderBatchesAndBackPressureAndFlushesAtTheEnd) {
   const int nice = threadNice();
   const std::size_t reported = runGraph(frames, patches, report, {GetParam(), kInFlight, 5});
 
-  EXPECT_EQ(reported, static_cast<std::size_t>(kFrames));
+  EXPECT_EQ(reported, static_cast<std::size_t>(kStreamFrames));
   EXPECT_EQ(frames.out_of_order, 0) << "a serial frame stage saw frames out of order";
   EXPECT_EQ(report.out_of_order, 0) << "the report saw frames out of order";
   EXPECT_EQ(patches.out_of_order, 0) << "commits out of finalization order";
@@ -240,7 +240,7 @@ TEST_P(FlowGraphTest, KeepsOrderBatchesAndBackPressureAndFlushesAtTheEnd) {
   }
   EXPECT_EQ(patches_in_batches, finalized.size());
   ASSERT_FALSE(report.batches.empty());
-  EXPECT_EQ(report.batches.rbegin()->second.frame_index, static_cast<std::uint64_t>(kFrames));
+  EXPECT_EQ(report.batches.rbegin()->second.frame_index, static_cast<std::uint64_t>(kStreamFrames));
   EXPECT_EQ(report.batches.rbegin()->second.size, 3u);
 
   // Texturing runs at a lower priority than the frame path.

@@ -69,7 +69,7 @@ bool timestampsAscend(const fs::path& path) {
   return previous >= 0.0;
 }
 
-#define TESSERA_REQUIRE_DEFAULT_RECORDING()                               \
+#define TESSERA_REQUIRE_OFFICE_FOR_REUSE()                                \
   if (!fs::is_regular_file(kRecording)) {                                 \
     GTEST_SKIP() << "recordings/office.oni not rendered (configure with " \
                     "TESSERA_RENDER_DEFAULT_RECORDING=ON)";               \
@@ -79,7 +79,7 @@ bool timestampsAscend(const fs::path& path) {
 // half turn between their grids, and the ground truth finds no false match. The database holds
 // the same textures and instances whether one thread or two ran.
 TEST(TextureReuse, TheSecondTableReusesTheFirstAndOneOrTwoThreadsStoreTheSame) {
-  TESSERA_REQUIRE_DEFAULT_RECORDING();
+  TESSERA_REQUIRE_OFFICE_FOR_REUSE();
   const fs::path root = test::freshTempDir();
   const RunSummary one = runOffice(root / "one", 1);
   reuse::Economy live;
@@ -165,7 +165,7 @@ TEST(TextureReuse, TheSecondTableReusesTheFirstAndOneOrTwoThreadsStoreTheSame) {
 // Repeated runs in one place: the second run with the same database reuses at least 90 % of its
 // patches' textures and grows the database by at most 10 %.
 TEST(TextureReuse, ASecondRunWithTheSameDatabaseReusesWhatTheFirstStored) {
-  TESSERA_REQUIRE_DEFAULT_RECORDING();
+  TESSERA_REQUIRE_OFFICE_FOR_REUSE();
   const fs::path root = test::freshTempDir();
   const std::string db_path = (root / "office.db").string();
   runOffice(root / "first", 2, db_path);
