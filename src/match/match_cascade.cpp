@@ -145,26 +145,58 @@ Rendered renderStored(const StoredTexture& stored, const core::Similarity2& patc
                        height, false);
 }
 
-TextureDescription describeTexture(const cv::Mat& rgb, const cv::Mat& mask,
-                                   const MatchConfig& config) {
+namespace {
+
+// `rgb` and `mask` as they are described: at most config.describe_max_px long.
+struct DescribedSize {
+  cv::Mat rgb, mask;
+  double scale = 1.0;  // described size over full size
+};
+
+DescribedSize describedSize(const cv::Mat& rgb, const cv::Mat& mask, const MatchConfig& config) {
+  const int longest = std::max(rgb.cols, rgb.rows);
+  if (config.describe_max_px <= 0 || longest <= config.describe_max_px) return {rgb, mask, 1.0};
+  DescribedSize small;
+  small.scale = static_cast<double>(config.describe_max_px) / longest;
+  cv::resize(rgb, small.rgb, cv::Size(), small.scale, small.scale, cv::INTER_AREA);
+  cv::resize(mask, small.mask, small.rgb.size(), 0, 0, cv::INTER_NEAREST);
+  return small;
+}
+
+// The CCV of `described`.
+Ccv describedCcv(const DescribedSize& described, CcvConfig ccv) {
+  if (described.scale != 1.0) {  // coherence is judged in full-size texels
+    const double area = described.scale * described.scale;
+    ccv.min_coherent_px = std::max(1, static_cast<int>(std::lround(ccv.min_coherent_px * area)));
+  }
+  return computeCcv(described.rgb, described.mask, ccv);
+}
+
+TextureDescription withMask(const cv::Mat& rgb, const cv::Mat& mask) {
   TextureDescription description;
   description.rgb = rgb;
   description.mask = mask.empty() ? cv::Mat(rgb.size(), CV_8UC1, cv::Scalar(255)) : mask;
-  const int longest = std::max(rgb.cols, rgb.rows);
-  if (config.describe_max_px <= 0 || longest <= config.describe_max_px) {
-    description.ccv = computeCcv(rgb, description.mask, config.ccv);
-    description.features = detectFeatures(rgb, description.mask, config.features);
-    return description;
-  }
-  const double f = static_cast<double>(config.describe_max_px) / longest;
-  cv::Mat small_rgb, small_mask;
-  cv::resize(rgb, small_rgb, cv::Size(), f, f, cv::INTER_AREA);
-  cv::resize(description.mask, small_mask, small_rgb.size(), 0, 0, cv::INTER_NEAREST);
-  CcvConfig ccv = config.ccv;  // coherence is judged in full-size texels
-  ccv.min_coherent_px = std::max(1, static_cast<int>(std::lround(ccv.min_coherent_px * f * f)));
-  description.ccv = computeCcv(small_rgb, small_mask, ccv);
-  description.features = detectFeatures(small_rgb, small_mask, config.features);
+  return description;
+}
+
+}  // namespace
+
+TextureDescription describeColours(const cv::Mat& rgb, const cv::Mat& mask,
+                                   const MatchConfig& config) {
+  TextureDescription description = withMask(rgb, mask);
+  description.ccv = describedCcv(describedSize(rgb, description.mask, config), config.ccv);
+  return description;
+}
+
+TextureDescription describeTexture(const cv::Mat& rgb, const cv::Mat& mask,
+                                   const MatchConfig& config) {
+  TextureDescription description = withMask(rgb, mask);
+  const DescribedSize described = describedSize(rgb, description.mask, config);
+  description.ccv = describedCcv(described, config.ccv);
+  description.features = detectFeatures(described.rgb, described.mask, config.features);
+  if (described.scale == 1.0) return description;
   // Back to full-size pixel centres: x_full + 0.5 = (x_small + 0.5) / f.
+  const double f = described.scale;
   for (cv::KeyPoint& k : description.features.keypoints) {
     k.pt = cv::Point2f(static_cast<float>((k.pt.x + 0.5) / f - 0.5),
                        static_cast<float>((k.pt.y + 0.5) / f - 0.5));

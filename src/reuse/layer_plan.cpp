@@ -134,7 +134,7 @@ std::optional<LayerPlan> LayerPlanner::planPattern(const match::TextureDescripti
   if (!boxes.empty()) {
     cv::Mat base_mask = bitmap.mask.clone();
     for (const cv::Rect& box : boxes) base_mask(box).setTo(0);
-    plan.base = match::describeTexture(bitmap.rgb, base_mask, cascade_.config());
+    plan.base = match::describeColours(bitmap.rgb, base_mask, cascade_.config());
   }
   // The explained rest may be a pattern the database has (the other brick wall's).
   std::vector<PatternCandidate> candidates;

@@ -112,6 +112,24 @@ TEST(MatchCascade, ATextureOverlappingAStoredOneInPartIsPlacedOverTheirCommonTex
   EXPECT_GT(verdict.psnr_db, 35.0);  // over the texels both cover
 }
 
+// A layer plan's base is looked up by its CCV alone: describeColours must give describeTexture's
+// CCV, at full size and scaled down, without the features' cost.
+TEST(MatchCascade, ColoursAloneGiveTheFullDescriptionsCcv) {
+  const MatchConfig config;
+  for (const cv::Size size : {cv::Size(300, 200), cv::Size(900, 500)}) {
+    const cv::Mat rgb = texture(size.width, size.height, 31);
+    cv::Mat mask(rgb.size(), CV_8UC1, cv::Scalar(255));
+    mask(cv::Rect(20, 30, 80, 60)).setTo(0);
+    const TextureDescription full = describeTexture(rgb, mask, config);
+    const TextureDescription colours = describeColours(rgb, mask, config);
+    ASSERT_FALSE(full.features.keypoints.empty()) << size;
+    EXPECT_TRUE(colours.features.keypoints.empty()) << size;
+    EXPECT_EQ(colours.ccv.values, full.ccv.values) << size;
+    EXPECT_EQ(colours.ccv.pixels, full.ccv.pixels) << size;
+    EXPECT_EQ(cv::countNonZero(colours.mask != mask), 0) << size;
+  }
+}
+
 TEST(MatchCascade, AnUnrelatedTextureIsStoredOnItsOwn) {
   const MatchConfig config;
   MemoryCatalog catalog(config.ccv);

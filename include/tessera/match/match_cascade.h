@@ -58,6 +58,10 @@ struct TextureDescription {
 };
 TextureDescription describeTexture(const cv::Mat& rgb, const cv::Mat& mask,
                                    const MatchConfig& config);
+// The same without features (their detection is most of the cost): for a bitmap that is looked
+// up by its CCV and compared pixel by pixel only.
+TextureDescription describeColours(const cv::Mat& rgb, const cv::Mat& mask,
+                                   const MatchConfig& config);
 
 struct StoredTexture {
   std::int64_t id = 0;

@@ -29,8 +29,9 @@ struct OverlayMatch {
 
 struct LayerPlan {
   std::optional<pattern::Pattern> found;  // a new pattern, in bitmap texels
-  // The bitmap without its overlay regions (when there are some), and a stored texture that
-  // shows it (then reused instead of the new pattern; always there without one).
+  // The bitmap without its overlay regions (when there are some; its CCV, no features), and
+  // a stored texture that shows it (then reused instead of the new pattern; always there
+  // without one).
   std::optional<match::TextureDescription> base;
   std::optional<match::CandidateVerdict> base_reuse;
   std::vector<OverlayMatch> overlays;
