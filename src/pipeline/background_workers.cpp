@@ -13,8 +13,9 @@
 namespace tessera::pipeline::internal {
 
 BackgroundWorkers::BackgroundWorkers(int threads, int nice) {
-  for (int i = 0; i < std::max(1, threads); ++i)
+  for (int i = 0; i < std::max(1, threads); ++i) {
     threads_.emplace_back([this, nice] { work(nice); });
+  }
 }
 
 BackgroundWorkers::~BackgroundWorkers() {

@@ -15,7 +15,7 @@ constexpr double kBucketsPerSample = 4.0;
 
 SampleBuckets::SampleBuckets(const std::vector<planes::ColourSample>& samples, double radius,
                              const Eigen::Vector2d& low, const Eigen::Vector2d& high)
-    : radius2_(radius * radius) {
+    : radius_(radius), radius2_(radius * radius) {
   std::vector<int> kept;
   kept.reserve(samples.size());
   positions_.reserve(samples.size());
@@ -55,7 +55,7 @@ int SampleBuckets::nearest(const Eigen::Vector2d& uv, int max_count, std::vector
   indices.clear();
   distance2.clear();
   found_.clear();
-  const double radius = std::sqrt(radius2_);
+  const double radius = radius_;
   const long x0 =
       std::max(0L, static_cast<long>(std::floor((uv.x() - radius - origin_.x()) / side_)));
   const long y0 =

@@ -28,7 +28,7 @@ class SampleBuckets {
 
  private:
   std::vector<Eigen::Vector2d> positions_;  // per sample, as doubles (as the distances are)
-  double radius2_ = 0.0;
+  double radius_ = 0.0, radius2_ = 0.0;
   double side_ = 1.0;  // the buckets' side, at least the radius
   Eigen::Vector2d origin_ = Eigen::Vector2d::Zero();
   long columns_ = 0, rows_ = 0;
