@@ -1,6 +1,8 @@
 #include "tessera/pipeline/flow_graph.h"
 
+#include <atomic>
 #include <chrono>
+#include <memory>
 #include <thread>
 #include <tuple>
 
@@ -22,17 +24,23 @@ struct Numbered {
   T item;
 };
 
+// Patch jobs and described patches travel the graph by pointer: the graph copies its messages
+// (into tasks, buffers and the workers' jobs), and a job holds a patch's colour samples, often
+// tens of MB.
+using JobMessage = std::shared_ptr<const PatchJob>;
+using DescribedMessage = std::shared_ptr<DescribedPatch>;
+
 // Numbers the patches the plane stage finalizes (and those it retires) in the order they
 // happened, and groups each frame's finalized patches into one batch.
 class PatchJobs {
  public:
-  std::vector<PatchJob> finalized(std::vector<planes::PatchSnapshot>& patches,
-                                  std::uint64_t frame_index) {
-    std::vector<PatchJob> jobs;
+  std::vector<JobMessage> finalized(std::vector<planes::PatchSnapshot>& patches,
+                                    std::uint64_t frame_index) {
+    std::vector<JobMessage> jobs;
     const auto now = std::chrono::steady_clock::now();
     for (planes::PatchSnapshot& patch : patches) {
-      jobs.push_back(
-          {next_sequence_++, next_batch_, patches.size(), frame_index, std::move(patch), now, {}});
+      jobs.push_back(std::make_shared<const PatchJob>(PatchJob{
+          next_sequence_++, next_batch_, patches.size(), frame_index, std::move(patch), now, {}}));
     }
     if (!jobs.empty()) ++next_batch_;
     patches.clear();
@@ -40,20 +48,54 @@ class PatchJobs {
   }
 
   // Patches merged into others leave the database in the same order.
-  std::vector<PatchJob> retired(const std::vector<planes::PatchEvent>& events) {
-    std::vector<PatchJob> jobs;
+  std::vector<JobMessage> retired(const std::vector<planes::PatchEvent>& events) {
+    std::vector<JobMessage> jobs;
     for (const planes::PatchEvent& event : events) {
       if (event.kind != planes::PatchEvent::Kind::kRetired) continue;
       PatchJob job;
       job.sequence = next_sequence_++;
       job.retired = event.id;
-      jobs.push_back(std::move(job));
+      jobs.push_back(std::make_shared<const PatchJob>(std::move(job)));
     }
     return jobs;
   }
 
  private:
   std::size_t next_sequence_ = 0, next_batch_ = 0;
+};
+
+// Holds the frame path back while too many patch jobs wait to be described and committed: a
+// frame reported while `bound` or more wait keeps its place in the limiter until commits
+// free one. A replay's source then waits; a live device drops frames instead. Without it
+// texturing that falls behind queues patches, colour samples and all, without end.
+class PatchBacklog {
+ public:
+  explicit PatchBacklog(std::size_t bound) : bound_(bound) {}
+
+  // The plane stage (or the end of the stream) queued `jobs` more.
+  void queued(std::size_t jobs) { queued_ += jobs; }
+  // The report node's calls (serial): how many limiter places to free now.
+  std::size_t frameReported() {
+    if (waiting() < bound_) return 1;
+    ++withheld_;
+    return 0;
+  }
+  std::size_t jobDone() {
+    ++done_;
+    std::size_t freed = 0;
+    while (withheld_ > 0 && waiting() < bound_) {
+      --withheld_;
+      ++freed;
+    }
+    return freed;
+  }
+
+ private:
+  std::size_t waiting() const { return queued_.load() - done_; }
+
+  const std::size_t bound_;
+  std::atomic<std::size_t> queued_{0};
+  std::size_t done_ = 0, withheld_ = 0;
 };
 
 // Tells the graph that an async node's job is done (however it ended), so that
@@ -122,64 +164,73 @@ std::size_t runGraph(FramePath& frames, PatchPath& patches, RunReport& report,
     // The plane stage sends the frame on to the report and each patch it finalized (or
     // retired) to the patch path, numbered in the order it happened.
     PatchJobs jobs;
-    using PlanesNode =
-        flow::multifunction_node<Numbered<FusedFrame>, std::tuple<Numbered<FusedFrame>, PatchJob>>;
+    PatchBacklog backlog(static_cast<std::size_t>(options.max_patches_waiting));
+    auto queue = [&backlog](std::vector<JobMessage> batch, auto& to) {
+      backlog.queued(batch.size());
+      for (JobMessage& job : batch) to.try_put(std::move(job));
+    };
+    using PlanesNode = flow::multifunction_node<Numbered<FusedFrame>,
+                                                std::tuple<Numbered<FusedFrame>, JobMessage>>;
     PlanesNode planes_node(
         graph, flow::serial, [&](Numbered<FusedFrame> fused, PlanesNode::output_ports_type& out) {
           fused.item = frames.findPlanes(std::move(fused.item));
-          for (PatchJob& job : jobs.retired(fused.item.patch_events)) {
-            std::get<1>(out).try_put(std::move(job));
-          }
-          for (PatchJob& job :
-               jobs.finalized(fused.item.finalized_patches, fused.item.frame.index)) {
-            std::get<1>(out).try_put(std::move(job));
-          }
+          queue(jobs.retired(fused.item.patch_events), std::get<1>(out));
+          queue(jobs.finalized(fused.item.finalized_patches, fused.item.frame.index),
+                std::get<1>(out));
           std::get<0>(out).try_put(std::move(fused));
         });
     // Bitmaps are built and described independently: as many at once as there are threads,
     // off the frame path. They are committed one at a time, in finalization order. Both run
     // on threads of their own at a lower priority (internal/background_workers.h), handed
     // over by async nodes.
-    using DescribeNode = flow::async_node<PatchJob, DescribedPatch>;
-    DescribeNode describe_node(graph, flow::unlimited,
-                               [&](const PatchJob& job, DescribeNode::gateway_type& gateway) {
-                                 gateway.reserve_wait();
-                                 describers.submit([&patches, &gateway, job] {
-                                   const ReleaseWait release{gateway};
-                                   gateway.try_put(patches.describe(job));
-                                 });
-                               });
-    flow::sequencer_node<DescribedPatch> in_order(
-        graph, [](const DescribedPatch& described) { return described.sequence; });
-    using CommitNode = flow::async_node<DescribedPatch, CommitMessage>;
-    CommitNode commit_node(
-        graph, flow::serial, [&](DescribedPatch described, CommitNode::gateway_type& gateway) {
+    using DescribeNode = flow::async_node<JobMessage, DescribedMessage>;
+    DescribeNode describe_node(
+        graph, flow::unlimited, [&](const JobMessage& job, DescribeNode::gateway_type& gateway) {
           gateway.reserve_wait();
-          committer.submit([&patches, &gateway, described = std::move(described)]() mutable {
+          describers.submit([&patches, &gateway, job] {
             const ReleaseWait release{gateway};
-            if (auto message = patches.commit(std::move(described))) {
-              gateway.try_put(std::move(*message));
-            }
+            gateway.try_put(std::make_shared<DescribedPatch>(patches.describe(*job)));
+          });
+        });
+    flow::sequencer_node<DescribedMessage> in_order(
+        graph, [](const DescribedMessage& described) { return described->sequence; });
+    // Every commit reaches the report, a retirement's (nothing to say) too, so that the
+    // backlog counts it done.
+    using Committed = std::optional<CommitMessage>;
+    using CommitNode = flow::async_node<DescribedMessage, Committed>;
+    CommitNode commit_node(
+        graph, flow::serial,
+        [&](const DescribedMessage& described, CommitNode::gateway_type& gateway) {
+          gateway.reserve_wait();
+          committer.submit([&patches, &gateway, described] {
+            const ReleaseWait release{gateway};
+            gateway.try_put(patches.commit(std::move(*described)));
           });
         });
     // Frames (in stream order) and commits (in finalization order) meet at the one node that
-    // writes the report; a reported frame lets the source read another.
+    // writes the report; a reported frame lets the source read another, unless the backlog
+    // withholds its place.
     flow::sequencer_node<Numbered<FusedFrame>> to_report(graph, numbered);
-    using ReportInput = flow::indexer_node<Numbered<FusedFrame>, CommitMessage>;
+    using ReportInput = flow::indexer_node<Numbered<FusedFrame>, Committed>;
     ReportInput report_input(graph);
     using ReportNode =
         flow::multifunction_node<ReportInput::output_type, std::tuple<flow::continue_msg>>;
     ReportNode report_node(
         graph, flow::serial,
         [&](const ReportInput::output_type& message, ReportNode::output_ports_type& out) {
+          std::size_t places = 0;
           if (message.tag() == 1) {
-            report.committed(flow::cast_to<CommitMessage>(message));
-            return;
+            if (const Committed& committed = flow::cast_to<Committed>(message)) {
+              report.committed(*committed);
+            }
+            places = backlog.jobDone();
+          } else {
+            const FusedFrame& fused = flow::cast_to<Numbered<FusedFrame>>(message).item;
+            report.frameDone(fused);
+            if (!fused.frame.source_interrupted) ++frames_reported;
+            places = backlog.frameReported();
           }
-          const FusedFrame& fused = flow::cast_to<Numbered<FusedFrame>>(message).item;
-          report.frameDone(fused);
-          if (!fused.frame.source_interrupted) ++frames_reported;
-          std::get<0>(out).try_put(flow::continue_msg{});
+          for (; places > 0; --places) std::get<0>(out).try_put(flow::continue_msg{});
         });
 
     flow::make_edge(source_node, limiter);
@@ -207,10 +258,8 @@ std::size_t runGraph(FramePath& frames, PatchPath& patches, RunReport& report,
     std::vector<planes::PatchSnapshot> finalized;
     const std::vector<planes::PatchEvent> events = frames.finishStream(finalized);
     report.patchEvents(events);
-    for (PatchJob& job : jobs.retired(events)) describe_node.try_put(std::move(job));
-    for (PatchJob& job : jobs.finalized(finalized, frames_reported)) {
-      describe_node.try_put(std::move(job));
-    }
+    queue(jobs.retired(events), describe_node);
+    queue(jobs.finalized(finalized, frames_reported), describe_node);
     graph.wait_for_all();
   });
   describers.rethrowFirst();

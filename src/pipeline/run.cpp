@@ -53,7 +53,8 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
   const bool live = source.isLive();
   runGraph(parts.stages, parts.stages, parts.stages,
            {options.threads, live ? pipeline.live_frames_in_flight : pipeline.max_frames_in_flight,
-            live ? pipeline.texture_nice_live : pipeline.texture_nice_replay});
+            live ? pipeline.texture_nice_live : pipeline.texture_nice_replay,
+            pipeline.max_patches_waiting});
   parts.sink.flush();
   parts.store->finishRun(parts.run_id);  // a server's store first sends what its journal holds
   const double wall_s =

@@ -11,9 +11,16 @@ void readConfig(const core::ConfigSection& section, PipelineConfig& config) {
   section.read("live_frames_in_flight", config.live_frames_in_flight);
   section.read("texture_nice_live", config.texture_nice_live);
   section.read("texture_nice_replay", config.texture_nice_replay);
-  if (config.max_frames_in_flight < 1 || config.live_frames_in_flight < 1) {
+  section.read("max_patches_waiting", config.max_patches_waiting);
+  section.read("return_freed_memory_s", config.return_freed_memory_s);
+  if (!(config.return_freed_memory_s >= 0.0)) {
+    throw core::ConfigError("pipeline: return_freed_memory_s must be 0 or more");
+  }
+  if (config.max_frames_in_flight < 1 || config.live_frames_in_flight < 1 ||
+      config.max_patches_waiting < 1) {
     throw core::ConfigError(
-        "pipeline: max_frames_in_flight and live_frames_in_flight must be at least 1");
+        "pipeline: max_frames_in_flight, live_frames_in_flight and max_patches_waiting must be "
+        "at least 1");
   }
   for (const int nice : {config.texture_nice_live, config.texture_nice_replay}) {
     if (nice < 0 || nice > 19) {

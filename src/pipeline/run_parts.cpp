@@ -58,7 +58,7 @@ RunParts::RunParts(core::FrameSource& input, const RunConfig& config, const RunO
       describe(config.textures, config.match, config.pattern),
       commit(*store, catalog, {config.match, config.pattern, run_id}),
       stages(source_stage, tracking, integration, planes, describe, commit, bitmaps, sink,
-             loop_closer.get(), options.listener) {
+             loop_closer.get(), options.listener, config.pipeline.return_freed_memory_s) {
   planes.spillSamplesTo(sample_dir);
   if (loop_closer && config.tsdf.correct_after_loop_closure) {
     integration.keepFramesForCorrection(options.out_dir / "tsdf_frames");

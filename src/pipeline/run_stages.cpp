@@ -2,6 +2,10 @@
 
 #include <chrono>
 
+#include <spdlog/spdlog.h>
+
+#include "tessera/core/memory.h"
+
 namespace tessera::pipeline::internal {
 
 FusedFrame RunStages::closeLoops(FusedFrame fused) {
@@ -29,6 +33,19 @@ void RunStages::frameDone(const FusedFrame& fused) {
   }
 }
 
+void RunStages::returnFreedMemory() {
+  if (return_freed_memory_s_ <= 0.0) return;
+  const SteadyTime now = std::chrono::steady_clock::now();
+  if (std::chrono::duration<double>(now - freed_memory_returned_at_).count() <
+      return_freed_memory_s_) {
+    return;
+  }
+  core::returnFreedMemory();
+  freed_memory_returned_at_ = std::chrono::steady_clock::now();
+  spdlog::debug("returned freed memory to the kernel in {:.1f} ms",
+                std::chrono::duration<double, std::milli>(freed_memory_returned_at_ - now).count());
+}
+
 std::optional<CommitMessage> RunStages::commit(DescribedPatch described) {
   if (described.retired) {
     commit_.retire(*described.retired);
@@ -45,6 +62,7 @@ std::optional<CommitMessage> RunStages::commit(DescribedPatch described) {
                         &bitmap->grid, &bitmap->image});
   }
   bitmaps_.keep(std::move(bitmap));
+  returnFreedMemory();
   const CommitRecord& record = message.record;
   const CommitFigures& totals = commit_.figures();
   message.figures = {record.instance.has_value(),

@@ -405,6 +405,9 @@ std::vector<planes::PatchEvent> PlaneStage::finish(std::vector<planes::PatchSnap
 std::vector<planes::PatchSnapshot> PlaneStage::snapshotsOf(
     const std::vector<planes::PatchEvent>& events) const {
   std::vector<planes::PatchSnapshot> snapshots;
+  // cv::Mat's move may throw, so a vector of snapshots copies them, samples and all, as it
+  // grows: reserve.
+  snapshots.reserve(events.size());
   for (const planes::PatchEvent& event : events) {
     if (event.kind != planes::PatchEvent::Kind::kFinalized) continue;
     if (const planes::Patch* patch = map_.find(event.id))

@@ -1,5 +1,3 @@
-#include <unistd.h>
-
 #include <chrono>
 #include <fstream>
 
@@ -9,23 +7,12 @@
 
 #include "tessera/core/cpu_time.h"
 #include "tessera/core/error.h"
+#include "tessera/core/memory.h"
 #include "tessera/core/trajectory.h"
 #include "tessera/pipeline/stages.h"
 #include "tessera/pipeline/texture_db_stages.h"
 
 namespace tessera::pipeline {
-
-namespace {
-
-// The process's resident memory now (/proc/self/statm: pages), MB; 0 where it cannot be read.
-double residentMb() {
-  std::ifstream statm("/proc/self/statm");
-  std::size_t total_pages = 0, resident_pages = 0;
-  if (!(statm >> total_pages >> resident_pages)) return 0.0;
-  return static_cast<double>(resident_pages) * static_cast<double>(sysconf(_SC_PAGESIZE)) / 1e6;
-}
-
-}  // namespace
 
 StreamFigures StatsSink::figures() const {
   StreamFigures figures;
@@ -90,7 +77,7 @@ void StatsSink::process(const FusedFrame& fused) {
   if (fused.frame.T_W_C_gt) ground_truth_[fused.frame.timestamp_ns] = *fused.frame.T_W_C_gt;
   const std::size_t bitmap_bytes = bitmap_bytes_ ? bitmap_bytes_() : 0;
   map_bytes_ = figures.tsdf_bytes + bitmap_bytes;
-  const double rss_mb = residentMb();
+  const double rss_mb = core::residentMb();
   rss_mb_.add(static_cast<double>(frames_done_ - 1), rss_mb);
   const double elapsed_s =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
@@ -105,6 +92,7 @@ void StatsSink::process(const FusedFrame& fused) {
                            {"bitmap_bytes", bitmap_bytes},
                            {"map_bytes", map_bytes_},
                            {"rss_mb", rss_mb},
+                           {"heap_mb", core::heapInUseMb()},
                            {"cpu_ms", cpu_ms},
                            {"textures_stored", textures_stored_}};
     figures.addTo(line);

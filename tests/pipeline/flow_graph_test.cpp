@@ -2,8 +2,9 @@
 // the frames in stream order, patches are committed in the order they were finalized (the
 // end-of-stream patches last), each batch's commits all reach the report, the report is never
 // called by two threads at once, and no more frames are in flight than the limiter allows;
-// texturing runs at a lower priority than the frame path, and a failure to describe a patch
-// ends the run with its error; for 1, 2 and 4 threads.
+// texturing runs at a lower priority than the frame path, the frame path waits while too many
+// patches wait for their textures, and a failure to describe a patch ends the run with its
+// error; for 1, 2 and 4 threads.
 #include "tessera/pipeline/flow_graph.h"
 
 #include <atomic>
@@ -90,6 +91,10 @@ class FakeFrames : public FramePath {
         batch_of_patch[next_id_++] = index;
       }
     }
+    if (commits_done != nullptr) {
+      const int waiting = static_cast<int>(finalization_order.size()) - *commits_done;
+      max_waiting = std::max(max_waiting, waiting);
+    }
     return fused;
   }
   std::vector<planes::PatchEvent> finishStream(
@@ -106,6 +111,11 @@ class FakeFrames : public FramePath {
 
   std::atomic<int> in_flight{0}, max_in_flight{0}, out_of_order{0}, track_nice{-100};
   std::vector<int> finalization_order;  // patch ids; a retirement as -id
+  // Patch jobs (finalized and retired) queued and not yet committed, at most, when
+  // `commits_done` counts the commits.
+  const std::atomic<int>* commits_done = nullptr;
+  int max_waiting = 0;
+  static constexpr int kMostJobsPerFrame = 3;  // two finalized, one retired
   std::map<int, std::uint64_t> batch_of_patch;
 
  private:
@@ -119,7 +129,7 @@ class FakePatches : public PatchPath {
  public:
   DescribedPatch describe(const PatchJob& job) const override {
     std::mt19937 random(static_cast<unsigned>(job.sequence) + 7);
-    nap(random, 3000);  // many at once, finishing out of order
+    nap(random, describe_max_us);  // many at once, finishing out of order
     describe_nice = threadNice();
     if (job.patch.id == fail_on_patch) throw std::runtime_error("describe failed");
     DescribedPatch described;
@@ -137,6 +147,7 @@ class FakePatches : public PatchPath {
   std::optional<CommitMessage> commit(DescribedPatch described) override {
     commit_nice = threadNice();
     out_of_order += described.sequence != committed_++ ? 1 : 0;
+    ++commits_done;
     if (described.retired) {
       commit_order.push_back(-*described.retired);
       return std::nullopt;
@@ -151,8 +162,9 @@ class FakePatches : public PatchPath {
   std::atomic<int> out_of_order{0};
   std::vector<int> commit_order;
   mutable std::atomic<int> describe_nice{-100};
-  std::atomic<int> commit_nice{-100};
+  std::atomic<int> commit_nice{-100}, commits_done{0};
   int fail_on_patch = -1;
+  int describe_max_us = 3000;
 
  private:
   std::size_t committed_ = 0;
@@ -255,6 +267,28 @@ TEST(FlowGraph, AFailureToDescribeAPatchEndsTheRunWithItsError) {
   patches.fail_on_patch = 2;
   FakeReport report(frames);
   EXPECT_THROW(runGraph(frames, patches, report, {2, kInFlight, 5}), std::runtime_error);
+}
+
+TEST_P(FlowGraphTest, HoldsTheFramePathBackWhileTooManyPatchesWaitForTextures) {
+  // Describing is slow, so texturing falls behind the frames. Unbounded, nearly every patch
+  // of the stream waits at once; bounded, the frame path waits, and only the frames already
+  // past the limiter add to the bound.
+  auto run = [](int threads, int bound) {
+    FakeFrames frames;
+    FakePatches patches;
+    patches.describe_max_us = 20'000;
+    frames.commits_done = &patches.commits_done;
+    FakeReport report(frames);
+    EXPECT_EQ(runGraph(frames, patches, report, {threads, kInFlight, 0, bound}),
+              static_cast<std::size_t>(kStreamFrames));
+    EXPECT_EQ(patches.commit_order, frames.finalization_order);
+    EXPECT_EQ(frames.in_flight, 0);
+    return frames.max_waiting;
+  };
+  const int bound = 1;
+  const int allowance = bound + kInFlight * FakeFrames::kMostJobsPerFrame;
+  EXPECT_LE(run(GetParam(), bound), allowance);
+  EXPECT_GT(run(GetParam(), 1000), allowance) << "the test's stream does not overload texturing";
 }
 
 INSTANTIATE_TEST_SUITE_P(Threads, FlowGraphTest, ::testing::Values(1, 2, 4),

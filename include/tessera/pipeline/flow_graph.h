@@ -8,7 +8,8 @@
 //                |                        describe (many at once)               |
 //                |                                    v                         |
 //                |                       commit (serial, in finalization order) -+
-//                +---------------- a frame reported frees its place ------------+
+//                +------- a frame reported frees its place (unless too many ----+
+//                         patches wait for their commits: then a commit does)
 //
 // Every serial stage takes its messages in order: frames in stream order, patches in
 // finalization order (sequencer nodes). Keyframes travel with their frame to the loops node,
@@ -71,6 +72,10 @@ struct GraphOptions {
   // the caller's (0: not at all): with the cores short, the frame path goes first and
   // texturing waits.
   int texture_nice = 0;
+  // Finalized patches (and retirements) waiting to be described and committed, at most; at
+  // the bound the frame path waits (a live device drops frames). The frames already in
+  // flight may still finalize a few more.
+  int max_patches_waiting = 4;
 };
 
 // Runs the stages over the whole stream, then finishes the patches (end of stream) and waits

@@ -26,6 +26,13 @@ struct PipelineConfig {
   // short, the frame path runs first and texturing waits for a free core; 0: not at all.
   int texture_nice_live = 10;
   int texture_nice_replay = 0;
+  // Finalized patches waiting for their textures, at most: at the bound a replay's source
+  // waits and a live device drops frames, so that a backlog cannot grow the memory without end.
+  int max_patches_waiting = 4;
+  // Seconds between returns of the freed memory glibc keeps to the kernel (malloc_trim, after
+  // a commit, off the frame path); 0: never. Frees on many threads leave free pages in many
+  // arenas that glibc does not give back by itself.
+  double return_freed_memory_s = 10.0;
 };
 
 void readConfig(const core::ConfigSection& section, PipelineConfig& config);

@@ -3,6 +3,8 @@
 // stage that does the work. Loop closure is reached from here only: keyframes in, corrections
 // out onto the frames. The commit also keeps the patch's bitmap and sums the run's totals for
 // the report.
+#include <chrono>
+
 #include "tessera/loop/loop_closer.h"
 #include "tessera/pipeline/flow_graph.h"
 #include "tessera/pipeline/run_listener.h"
@@ -14,7 +16,7 @@ class RunStages : public FramePath, public PatchPath, public RunReport {
   RunStages(SourceStage& source, TrackingStage& tracking, IntegrationStage& integration,
             PlaneStage& planes, const DescribeStage& describe, CommitStage& commit,
             BitmapFiles& bitmaps, StatsSink& sink, loop::LoopCloser* loop_closer,
-            RunListener* listener)
+            RunListener* listener, double return_freed_memory_s = 0.0)
       : source_(source),
         tracking_(tracking),
         integration_(integration),
@@ -24,7 +26,8 @@ class RunStages : public FramePath, public PatchPath, public RunReport {
         bitmaps_(bitmaps),
         sink_(sink),
         loop_closer_(loop_closer),
-        listener_(listener) {}
+        listener_(listener),
+        return_freed_memory_s_(return_freed_memory_s) {}
 
   std::optional<core::Frame> next() override { return source_.next(); }
   TrackedFrame track(core::Frame frame) override { return tracking_.process(std::move(frame)); }
@@ -50,6 +53,9 @@ class RunStages : public FramePath, public PatchPath, public RunReport {
   double loopWaitS() const { return loop_wait_s_; }
 
  private:
+  // On the committing thread, off the frame path, at most every return_freed_memory_s_.
+  void returnFreedMemory();
+
   SourceStage& source_;
   TrackingStage& tracking_;
   IntegrationStage& integration_;
@@ -61,6 +67,9 @@ class RunStages : public FramePath, public PatchPath, public RunReport {
   loop::LoopCloser* loop_closer_;  // null without loop closure
   RunListener* listener_;          // may be null
   double loop_wait_s_ = 0.0;
+  // PipelineConfig::return_freed_memory_s; when memory was last returned (after a commit).
+  double return_freed_memory_s_;
+  SteadyTime freed_memory_returned_at_ = std::chrono::steady_clock::now();
 };
 
 }  // namespace tessera::pipeline::internal
