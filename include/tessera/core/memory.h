@@ -1,6 +1,6 @@
 #pragma once
-// The process's memory as a long run watches it (docs/METRICS.md, "Memory"): what the kernel
-// holds for it, and how much of that the program actually uses.
+// The process's memory as a long run watches it (`rss_mb` and `heap_mb` in stats.jsonl,
+// docs/METRICS.md): what the kernel holds for it, and how much of that the program uses.
 
 namespace tessera::core {
 
@@ -8,7 +8,8 @@ namespace tessera::core {
 double residentMb();
 // Bytes the program has allocated and not freed (glibc's mallinfo2: in use in every arena,
 // plus blocks mapped on their own), MB. Resident memory above it is freed memory glibc
-// keeps, or the code and libraries.
+// keeps, or the code and libraries. Walks every arena's free lists: about 1 ms on a heap of
+// 1 GB, so sample it sparingly.
 double heapInUseMb();
 // Returns the free pages glibc holds in every arena to the kernel (malloc_trim). Frees made
 // on many threads leave such pages in many arenas, where the kernel cannot take them back.
