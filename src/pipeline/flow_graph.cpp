@@ -1,5 +1,6 @@
 #include "tessera/pipeline/flow_graph.h"
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <memory>
@@ -164,7 +165,7 @@ std::size_t runGraph(FramePath& frames, PatchPath& patches, RunReport& report,
     // The plane stage sends the frame on to the report and each patch it finalized (or
     // retired) to the patch path, numbered in the order it happened.
     PatchJobs jobs;
-    PatchBacklog backlog(static_cast<std::size_t>(options.max_patches_waiting));
+    PatchBacklog backlog(static_cast<std::size_t>(std::max(1, options.max_patches_waiting)));
     auto queue = [&backlog](std::vector<JobMessage> batch, auto& to) {
       backlog.queued(batch.size());
       for (JobMessage& job : batch) to.try_put(std::move(job));

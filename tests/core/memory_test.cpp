@@ -1,6 +1,8 @@
 // The memory figures of a long run: the heap in use follows what the program holds, and
 // returning freed memory gives the kernel back pages that a live block above them pinned.
 // Sanitizer builds replace malloc, so there these figures mean nothing and the tests skip.
+#include <malloc.h>
+
 #include <cstring>
 #include <memory>
 #include <vector>
@@ -14,13 +16,21 @@ namespace {
 
 #if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
 constexpr bool kSanitized = true;
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer) || __has_feature(thread_sanitizer)
+constexpr bool kSanitized = true;
+#else
+constexpr bool kSanitized = false;
+#endif
 #else
 constexpr bool kSanitized = false;
 #endif
 
-// 2,000 blocks of 40 KB (80 MB), each below glibc's mmap threshold so that they share the
-// heap, every byte written so that the pages are resident.
+// 2,000 blocks of 40 KB (80 MB), each below glibc's mmap threshold (set here, whatever the
+// environment says) so that they share the heap, every byte written so that the pages are
+// resident.
 std::vector<std::unique_ptr<char[]>> manySmallBlocks() {
+  mallopt(M_MMAP_THRESHOLD, 1 << 20);
   std::vector<std::unique_ptr<char[]>> blocks(2000);
   for (auto& block : blocks) {
     block = std::make_unique<char[]>(40'000);

@@ -48,7 +48,10 @@ class FakeFrames : public FramePath {
  public:
   std::optional<core::Frame> next() override {
     nap(source_random_, 300);
-    if (read_ == kStreamFrames) return std::nullopt;
+    if (read_ == kStreamFrames) {
+      stream_read = true;
+      return std::nullopt;
+    }
     core::Frame frame;
     frame.index = static_cast<std::uint64_t>(read_++);
     frame.timestamp_ns = static_cast<std::int64_t>(frame.index) * 33'000'000;
@@ -110,6 +113,7 @@ class FakeFrames : public FramePath {
   }
 
   std::atomic<int> in_flight{0}, max_in_flight{0}, out_of_order{0}, track_nice{-100};
+  std::atomic<bool> stream_read{false};  // the source said the stream ended
   std::vector<int> finalization_order;  // patch ids; a retirement as -id
   // Patch jobs (finalized and retired) queued and not yet committed, at most, when
   // `commits_done` counts the commits.
@@ -130,6 +134,9 @@ class FakePatches : public PatchPath {
   DescribedPatch describe(const PatchJob& job) const override {
     std::mt19937 random(static_cast<unsigned>(job.sequence) + 7);
     nap(random, describe_max_us);  // many at once, finishing out of order
+    while (hold_until != nullptr && !*hold_until) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    }
     describe_nice = threadNice();
     if (job.patch.id == fail_on_patch) throw std::runtime_error("describe failed");
     DescribedPatch described;
@@ -165,6 +172,7 @@ class FakePatches : public PatchPath {
   std::atomic<int> commit_nice{-100}, commits_done{0};
   int fail_on_patch = -1;
   int describe_max_us = 3000;
+  const std::atomic<bool>* hold_until = nullptr;  // describing waits until it is set
 
  private:
   std::size_t committed_ = 0;
@@ -270,13 +278,15 @@ TEST(FlowGraph, AFailureToDescribeAPatchEndsTheRunWithItsError) {
 }
 
 TEST_P(FlowGraphTest, HoldsTheFramePathBackWhileTooManyPatchesWaitForTextures) {
-  // Describing is slow, so texturing falls behind the frames. Unbounded, nearly every patch
-  // of the stream waits at once; bounded, the frame path waits, and only the frames already
-  // past the limiter add to the bound.
+  // Describing is slow, so texturing falls behind the frames. Bounded, the frame path waits,
+  // and only the frames already past the limiter add to the bound. Unbounded (and describing
+  // held until the whole stream is read, so that timing cannot decide it), every patch job of
+  // the stream waits at once.
   auto run = [](int threads, int bound) {
     FakeFrames frames;
     FakePatches patches;
     patches.describe_max_us = 20'000;
+    if (bound > 100) patches.hold_until = &frames.stream_read;
     frames.commits_done = &patches.commits_done;
     FakeReport report(frames);
     EXPECT_EQ(runGraph(frames, patches, report, {threads, kInFlight, 0, bound}),
