@@ -14,6 +14,7 @@
 #include "stop_request.h"
 #include "tessera/core/error.h"
 #include "tessera/db/store_copy.h"
+#include "tessera/db/store_prune.h"
 #include "tessera/db/texture_store.h"
 #include "tessera/db/texture_summary_json.h"
 #include "tessera/match/match_cascade.h"
@@ -203,6 +204,18 @@ int copy(const db::TextureStore& from, const std::string& destination) {
   return 0;
 }
 
+// Removes the textures finished runs stored that no instance uses (db::pruneUnused).
+int prune(db::TextureStore& store) {
+  const db::PruneReport report = db::pruneUnused(store);
+  fmt::print("{} unused textures removed ({:.1f} MB of PNG), {} left\n", report.removed,
+             static_cast<double>(report.png_bytes) / 1e6, report.textures_left);
+  if (report.kept_unfinished > 0) {
+    fmt::print("{} unused textures of runs not finished kept (a run still going may use them)\n",
+               report.kept_unfinished);
+  }
+  return 0;
+}
+
 // Sends a journal a run left (its server was away at the end) to that server.
 int flush(const DbArguments& args) {
   const db::ServerLink link = db::flushJournal(args.db, args.destination, args.wait_s);
@@ -272,6 +285,11 @@ CLI::App* addDbCommand(CLI::App& app, DbArguments& args) {
   copy->add_option("DESTINATION", args.destination,
                    "Database to copy into: SQLite file or postgresql:// URL")
       ->required();
+  CLI::App* prune = db->add_subcommand(
+      "prune",
+      "Remove the textures finished runs stored that no instance uses (older versions "
+      "of patches); imported textures stay");
+  add_db(prune);
   CLI::App* flush = db->add_subcommand(
       "flush", "Send the commits a run left in OUT/db_journal.sqlite (its PostgreSQL server "
                "was away when it ended) to that server");
@@ -290,7 +308,7 @@ int dbCommand(const CLI::App& db, const DbArguments& args) {
   try {
     const auto parsed = [&db](const char* name) { return db.get_subcommand(name)->parsed(); };
     if (parsed("flush")) return flush(args);
-    const bool writes = parsed("import");
+    const bool writes = parsed("import") || parsed("prune");
     const std::unique_ptr<db::TextureStore> store =
         db::openTextureStore(args.db, {writes, !writes});
     if (parsed("list")) return list(*store, args.json);
@@ -299,6 +317,7 @@ int dbCommand(const CLI::App& db, const DbArguments& args) {
     if (parsed("import")) return import(*store, args);
     if (parsed("serve")) return serve(args);
     if (parsed("copy")) return copy(*store, args.destination);
+    if (parsed("prune")) return prune(*store);
     return stats(*store, args.json);
   } catch (const core::Error& e) {
     spdlog::error("{}", e.what());

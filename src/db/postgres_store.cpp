@@ -2,9 +2,11 @@
 // (internal/postgres_store.h).
 #include "internal/postgres_store.h"
 
+#include <algorithm>
 #include <utility>
 
 #include <fmt/format.h>
+#include <spdlog/spdlog.h>
 #include <pqxx/pqxx>
 
 #include "internal/encoded_texture.h"
@@ -332,6 +334,45 @@ std::vector<std::int64_t> PostgresStore::commit(const Commit& commit) {
     throw core::Error(
         fmt::format("{} (the commit was rolled back; nothing of it is stored)", e.what()));
   }
+}
+
+std::vector<std::int64_t> PostgresStore::removeUnused(std::int64_t run_id,
+                                                      const std::vector<std::int64_t>& candidates) {
+  checkWritable();
+  std::vector<std::int64_t> removed;
+  const std::lock_guard lock(write_mutex_);
+  if (candidates.empty() || !may_remove_) return removed;
+  try {
+    // An instance another process commits at the same time either finds the texture (the
+    // removal then waits for its key-share lock, sees the instance and keeps the row) or the
+    // foreign key refuses that instance: never an instance of a removed texture.
+    onConnection(writer_, [&](pqxx::connection& db) {
+      removed.clear();
+      pqxx::work tx(db);
+      const std::string sql = removeUnusedTextureSql(SqlDialect::kPostgres);
+      for (const std::int64_t id : candidates) {
+        if (tx.exec_params(sql, id, run_id).affected_rows() > 0) removed.push_back(id);
+      }
+      tx.commit();
+      return 0;
+    });
+  } catch (const ServerUnavailable&) {
+    throw;
+  } catch (const pqxx::insufficient_privilege&) {
+    // A robot's role may not delete textures (docs/FLEET.md): they stay for the owner's prune.
+    may_remove_ = false;
+    spdlog::info(
+        "{}: this role may not delete textures; the ones older patch versions no "
+        "longer use stay until the database's owner runs `tessera db prune`",
+        location_);
+    return {};
+  } catch (const std::exception& e) {
+    throw core::Error(fmt::format("{}: cannot remove unused textures (nothing removed): {}",
+                                  location_, e.what()));
+  }
+  std::sort(removed.begin(), removed.end());
+  removed.erase(std::unique(removed.begin(), removed.end()), removed.end());
+  return removed;
 }
 
 std::vector<std::int64_t> PostgresStore::writeCommit(pqxx::connection& db, const Commit& commit,

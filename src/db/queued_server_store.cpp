@@ -1,6 +1,7 @@
 #include "internal/queued_server_store.h"
 
 #include <algorithm>
+#include <map>
 #include <system_error>
 
 #include <unistd.h>
@@ -107,6 +108,34 @@ std::vector<std::int64_t> QueuedServerStore::commit(const Commit& commit) {
   lock.unlock();
   wake_.notify_all();
   return ids;
+}
+
+std::vector<std::int64_t> QueuedServerStore::removeUnused(
+    std::int64_t run_id, const std::vector<std::int64_t>& candidates) {
+  // Only once the server has every commit: a queued commit may still use a candidate, and a
+  // texture still in the journal has no server id yet. What is not removed now stays stored
+  // unused, which costs space, not correctness.
+  const std::lock_guard lock(mutex_);
+  if (down_ || journal_->entries() > 0) return {};
+  std::map<std::int64_t, std::int64_t> given;  // server id -> the id the caller knows
+  std::vector<std::int64_t> on_server;
+  for (const std::int64_t id : candidates) {
+    const std::optional<std::int64_t> sent = isProvisional(id) ? journal_->serverId(id) : id;
+    if (!sent) continue;
+    given[*sent] = id;
+    on_server.push_back(*sent);
+  }
+  std::vector<std::int64_t> removed;
+  try {
+    for (const std::int64_t id : server_->removeUnused(run_id, on_server)) {
+      removed.push_back(given.at(id));
+    }
+  } catch (const ServerUnavailable& e) {
+    // Not an outage to queue for: the next commit finds out. They stay stored for now.
+    spdlog::debug("{}: unused textures not removed: {}", server_->location(), e.what());
+  }
+  std::sort(removed.begin(), removed.end());
+  return removed;
 }
 
 void QueuedServerStore::finishRun(std::int64_t run_id) {

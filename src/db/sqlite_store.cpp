@@ -1,12 +1,14 @@
 // Opening, the reader pool and the writes of the SQLite store (internal/sqlite_store.h).
 #include "internal/sqlite_store.h"
 
+#include <algorithm>
 #include <utility>
 
 #include <fmt/format.h>
 
 #include "internal/encoded_texture.h"
 #include "internal/postgres_open.h"
+#include "internal/schema_sql.h"
 #include "internal/sqlite_schema.h"
 #include "internal/sqlite_texture_rows.h"
 #include "internal/texture_codec.h"
@@ -162,6 +164,32 @@ std::vector<std::int64_t> SqliteStore::commit(const Commit& commit) {
     throw core::Error(
         fmt::format("{} (the commit was rolled back; nothing of it is stored)", e.what()));
   }
+}
+
+std::vector<std::int64_t> SqliteStore::removeUnused(std::int64_t run_id,
+                                                    const std::vector<std::int64_t>& candidates) {
+  std::vector<std::int64_t> removed;
+  if (candidates.empty()) return removed;
+  const std::lock_guard lock(write_mutex_);
+  Connection& db = writer();
+  db.exec("BEGIN IMMEDIATE");
+  try {
+    const std::string sql = removeUnusedTextureSql(SqlDialect::kSqlite);
+    Statement remove(db, sql.c_str());
+    for (const std::int64_t id : candidates) {
+      remove.reset();
+      remove.bind(1, id).bind(2, run_id).run();
+      if (db.changes() > 0) removed.push_back(id);
+    }
+    db.exec("COMMIT");
+  } catch (const std::exception& e) {
+    db.rollbackQuietly();
+    throw core::Error(fmt::format("{}: cannot remove unused textures (nothing removed): {}",
+                                  location_, e.what()));
+  }
+  std::sort(removed.begin(), removed.end());
+  removed.erase(std::unique(removed.begin(), removed.end()), removed.end());
+  return removed;
 }
 
 std::vector<std::int64_t> SqliteStore::writeCommit(const Commit& commit,

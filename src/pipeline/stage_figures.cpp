@@ -116,6 +116,7 @@ void BitmapFigures::addTo(json& report) const {
 void CommitFigures::addTo(json& report) const {
   report["textures_stored"] = textures_stored;
   report["patterns_stored"] = patterns_stored;
+  report["textures_removed"] = textures_removed;
   report["commit_failures"] = commit_failures;
   report["ccv_considered"] = ccv_considered;
   report["ccv_rejection"] = orNull(ratio(ccv_removed, ccv_considered));

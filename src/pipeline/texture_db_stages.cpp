@@ -17,6 +17,21 @@ double msSince(SteadyTime start) {
       .count();
 }
 
+// The textures `before` (a patch's layers) used that `after` (its layers now) does not.
+std::vector<std::int64_t> texturesLeft(const std::vector<db::TextureInstance>& before,
+                                       const std::vector<db::TextureInstance>& after) {
+  std::vector<std::int64_t> left;
+  for (const db::TextureInstance& old : before) {
+    const bool kept = std::any_of(after.begin(), after.end(), [&](const db::TextureInstance& now) {
+      return now.texture_id == old.texture_id;
+    });
+    if (!kept && std::find(left.begin(), left.end(), old.texture_id) == left.end()) {
+      left.push_back(old.texture_id);
+    }
+  }
+  return left;
+}
+
 // The texel mask of a bitmap: observed and inpainted texels.
 cv::Mat validTexels(const texture::PatchBitmap& bitmap) {
   cv::Mat mask;
@@ -145,7 +160,10 @@ CommitRecord CommitStage::process(DescribedPatch described) {
       instance.texture_id = ids.at(static_cast<std::size_t>(-instance.texture_id - 1));
     }
   }
-  instances_[bitmap.id] = commit.instances;
+  std::vector<db::TextureInstance>& stored = instances_[bitmap.id];
+  const std::vector<std::int64_t> superseded = texturesLeft(stored, commit.instances);
+  stored = commit.instances;
+  removeUnused(superseded);
   shown_[bitmap.id] = reuse::shownPatch(bitmap.grid.texels(), commit.instances,
                                         catalog_.loadLayers(commit.instances));
   record.instance = commit.instances.front();
@@ -163,6 +181,9 @@ void CommitStage::retire(int patch_id) {
   try {
     store_.commit(commit);
     figures_.store_commit_ms.add(msSince(commit_start));
+    if (const auto it = instances_.find(patch_id); it != instances_.end()) {
+      removeUnused(texturesLeft(it->second, {}));
+    }
   } catch (const core::Error& e) {
     // The database keeps an instance of a patch the map no longer has; the map is right.
     spdlog::error("patch {} (merged into another): its instances stay: {}", patch_id, e.what());
@@ -171,6 +192,18 @@ void CommitStage::retire(int patch_id) {
   instances_.erase(patch_id);
   shown_.erase(patch_id);
   ++figures_.retirements;
+}
+
+void CommitStage::removeUnused(const std::vector<std::int64_t>& superseded) {
+  if (superseded.empty()) return;
+  try {
+    for (const std::int64_t id : store_.removeUnused(rules_.run_id, superseded)) {
+      catalog_.remove(id);
+      ++figures_.textures_removed;
+    }
+  } catch (const core::Error& e) {  // they stay stored, unused: space, not correctness
+    spdlog::warn("superseded textures not removed: {}", e.what());
+  }
 }
 
 }  // namespace tessera::pipeline

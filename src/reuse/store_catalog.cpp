@@ -21,13 +21,17 @@ std::shared_ptr<const match::StoredTexture> storedTextureOf(const db::TextureRec
   description.mask = record.mask;
   description.ccv.values = record.ccv;
   description.ccv.pixels = static_cast<std::size_t>(cv::countNonZero(record.mask));
-  if (record.ccv.size() != match::ccvLength(config.ccv)) {  // stored under other CCV settings
-    description.ccv = match::computeCcv(record.rgb, record.mask, config.ccv);
-  }
-  if (record.feature_kind == config.features.detector) {
-    description.features = {record.feature_kind, record.keypoints, record.descriptors};
+  // Stored under other settings: described again as a new bitmap is (at the described size).
+  if (record.feature_kind != config.features.detector) {
+    const match::TextureDescription again =
+        match::describeTexture(record.rgb, record.mask, config);
+    description.ccv.values = again.ccv.values;
+    description.features = again.features;
   } else {
-    description.features = match::detectFeatures(record.rgb, record.mask, config.features);
+    description.features = {record.feature_kind, record.keypoints, record.descriptors};
+    if (record.ccv.size() != match::ccvLength(config.ccv)) {
+      description.ccv.values = match::describeColours(record.rgb, record.mask, config).ccv.values;
+    }
   }
   return stored;
 }
@@ -39,7 +43,7 @@ StoreCatalog::StoreCatalog(const db::TextureStore& store, const match::MatchConf
     if (entry.ccv.size() == dims) {
       index_.add(entry.id, entry.ccv);
     } else if (const auto record = store.texture(entry.id)) {  // stored under other settings
-      index_.add(entry.id, match::computeCcv(record->rgb, record->mask, config.ccv).values);
+      index_.add(entry.id, match::describeColours(record->rgb, record->mask, config).ccv.values);
     }
     ++size_;
   }
@@ -122,6 +126,15 @@ void StoreCatalog::add(std::shared_ptr<const match::StoredTexture> texture) {
     ++size_;
   }
   hold(std::move(texture));
+}
+
+void StoreCatalog::remove(std::int64_t id) {
+  if (index_.remove(id)) --size_;
+  if (const auto it = cache_.find(id); it != cache_.end()) {
+    cached_bytes_ -= it->second.bytes;
+    recency_.erase(it->second.recency);
+    cache_.erase(it);
+  }
 }
 
 db::TextureRecord textureRecordOf(const match::TextureDescription& description,

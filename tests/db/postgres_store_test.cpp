@@ -11,6 +11,7 @@
 #include "db/store_test_support.h"
 #include "support/postgres_test.h"
 #include "tessera/db/store_copy.h"
+#include "tessera/db/store_prune.h"
 #include "tessera/db/texture_store.h"
 
 namespace tessera::db {
@@ -73,6 +74,11 @@ TEST_F(PostgresStoreTest, TheSameCommitsReadTheSameFromBothStores) {
   EXPECT_EQ(sa.texture_pixels, sb.texture_pixels);
   ASSERT_EQ(postgres->runs().size(), 1u);
   EXPECT_TRUE(postgres->runs()[0].finished);
+}
+
+TEST_F(PostgresStoreTest, OnlyTheRunsUnusedTexturesAreRemoved) {
+  const auto store = openTextureStore(freshDatabase());
+  test::expectOnlyTheRunsUnusedTexturesAreRemoved(*store);
 }
 
 // Four writers at once, each with its own connections (as four robots would), commit textures
@@ -264,6 +270,17 @@ TEST_F(PostgresStoreTest, ARobotsRoleCommitsAndReadsButCannotDropOrMigrate) {
     const auto store = openTextureStore(as_robot);
     commitRun(*store);
     EXPECT_EQ(store->stats().textures, 3u);
+    // The retired patch's texture is unused; this role may not delete it (said once).
+    std::vector<std::int64_t> all;
+    for (const TextureSummary& t : store->textures()) all.push_back(t.id);
+    EXPECT_TRUE(store->removeUnused(store->runs().at(0).id, all).empty());
+    EXPECT_TRUE(store->removeUnused(store->runs().at(0).id, all).empty());
+    EXPECT_EQ(store->stats().textures, 3u);
+  }
+  {  // the owner's prune does
+    const auto owner = openTextureStore(url);
+    EXPECT_EQ(pruneUnused(*owner).removed, 1u);
+    EXPECT_EQ(owner->stats().textures, 2u);
   }
   EXPECT_FALSE(cluster_->psql("DROP TABLE textures", database, "robot_role_test"));
   EXPECT_FALSE(cluster_->psql("DELETE FROM textures", database, "robot_role_test"));

@@ -36,6 +36,10 @@ class StandInServer final : public TextureStore {
   std::vector<std::int64_t> commit(const Commit& commit) override {
     return reachable().commit(commit);
   }
+  std::vector<std::int64_t> removeUnused(std::int64_t run_id,
+                                         const std::vector<std::int64_t>& candidates) override {
+    return reachable().removeUnused(run_id, candidates);
+  }
   std::optional<std::int64_t> findByContentKey(const std::string& key) const override {
     return reachable().findByContentKey(key);
   }
@@ -159,6 +163,32 @@ TEST_F(ServerQueueTest, CommitsMadeWhileTheServerIsAwayAreSentInOrderWhenItIsBac
   store->finishRun(run);
   EXPECT_TRUE(server()->runs().at(0).finished);
   EXPECT_EQ(server()->stats().textures, 4u);
+}
+
+TEST_F(ServerQueueTest, UnusedTexturesAreRemovedOnlyOnceTheServerHasEveryCommit) {
+  const auto store = open();
+  const std::int64_t run = store->beginRun("office");
+  const auto version = [&](int v, std::uint32_t seed) {
+    Commit commit;
+    commit.textures = {makeTexture(seed)};
+    commit.textures[0].run_id = run;
+    commit.instances = {instanceOf(run, 1, v, -1)};
+    return store->commit(commit).at(0);
+  };
+  const std::int64_t first = version(1, 21);
+  *away_ = true;
+  const std::int64_t second = version(2, 22);  // queued: a provisional id
+  EXPECT_TRUE(store->removeUnused(run, {first}).empty());
+  *away_ = false;
+  ASSERT_TRUE(sentWithin(*store, std::chrono::seconds(10)));
+  version(3, 23);
+  // The caller's ids come back, the provisional one included.
+  EXPECT_EQ(store->removeUnused(run, {second, first}), (std::vector<std::int64_t>{first, second}));
+  EXPECT_EQ(server()->stats().textures, 1u);
+  *away_ = true;  // away with an empty queue: nothing removed, and commits still go first-hand
+  EXPECT_TRUE(store->removeUnused(run, {first}).empty());
+  EXPECT_EQ(store->serverLink()->outages, 1u);
+  *away_ = false;
 }
 
 TEST_F(ServerQueueTest, ARunEndingWhileTheServerIsAwayLeavesItsCommitsForTheNextOpen) {

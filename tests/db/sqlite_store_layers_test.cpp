@@ -358,5 +358,19 @@ TEST(SqliteStoreMigration, FailedMigrationLeavesTheVersion1FileAsItWas) {
   EXPECT_EQ(fieldsOf(read_only->instances()), version1Instances());
 }
 
+TEST(SqliteStoreLayers, OnlyTheRunsUnusedTexturesAreRemoved) {
+  TempFolder dir;
+  const auto path = dir / "textures.db";
+  {
+    auto store = openSqliteStore(path);
+    expectOnlyTheRunsUnusedTexturesAreRemoved(*store);
+  }
+  // Read-only, it removes nothing and says why.
+  auto reader = openSqliteStore(path, {.create = false, .read_only = true});
+  const std::int64_t any = reader->textures().at(0).id;
+  EXPECT_NE(errorOf([&] { reader->removeUnused(1, {any}); }).find("read-only"), std::string::npos);
+  EXPECT_TRUE(reader->texture(any).has_value());
+}
+
 }  // namespace
 }  // namespace tessera::db::test

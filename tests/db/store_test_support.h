@@ -181,6 +181,56 @@ inline void commitRun(TextureStore& store) {
   store.finishRun(run);
 }
 
+// TextureStore::removeUnused, on either store: of the textures offered, only those the run
+// stored and no instance uses go; imported ones, another run's and used ones stay.
+inline void expectOnlyTheRunsUnusedTexturesAreRemoved(TextureStore& store) {
+  const std::int64_t yesterday = store.beginRun("yesterday");
+  const std::int64_t today = store.beginRun("today");
+  const auto instance = [&](int patch, int version, int layer, std::int64_t texture_id) {
+    TextureInstance i;
+    i.run_id = today;
+    i.patch_id = patch;
+    i.version = version;
+    i.layer = layer;
+    i.texture_id = texture_id;
+    return i;
+  };
+  Commit first;  // patch 2 version 1 (a base and an overlay), patch 3 sharing the overlay
+  first.textures = {makeTexture(61), makeTexture(62), makeTexture(63), makeTexture(64)};
+  first.textures[0].run_id = today;      // patch 2's old base
+  first.textures[1].run_id = today;      // the shared overlay
+  first.textures[2].run_id = 0;          // imported, used by nothing
+  first.textures[3].run_id = yesterday;  // another run's, used by nothing
+  first.instances = {instance(2, 1, 0, -1), instance(2, 1, 1, -2), instance(3, 1, 0, -2)};
+  const std::vector<std::int64_t> ids = store.commit(first);
+  Commit second;  // patch 2 version 2: a new base, no overlay
+  second.textures = {makeTexture(65)};
+  second.textures[0].run_id = today;
+  second.instances = {instance(2, 2, 0, -1)};
+  const std::int64_t new_base = store.commit(second).at(0);
+
+  const std::int64_t unknown = new_base + 1000;
+  const std::vector<std::int64_t> offered = {ids[2], ids[3], new_base, ids[1],
+                                             ids[0], ids[0], unknown};
+  EXPECT_EQ(store.removeUnused(today, offered), std::vector<std::int64_t>{ids[0]});
+  EXPECT_FALSE(store.texture(ids[0]).has_value());
+  for (const std::int64_t kept : {ids[1], ids[2], ids[3], new_base}) {
+    EXPECT_TRUE(store.texture(kept).has_value()) << "texture " << kept;
+  }
+  EXPECT_FALSE(store.findByContentKey(contentKey(first.textures[0].rgb, first.textures[0].mask)));
+  EXPECT_TRUE(store.removeUnused(today, offered).empty());       // nothing more to remove
+  EXPECT_TRUE(store.removeUnused(yesterday, {ids[1]}).empty());  // not that run's
+  Commit retire;  // patch 3 leaves: the overlay is used by nothing now
+  retire.retired = {{today, 3}};
+  store.commit(retire);
+  EXPECT_EQ(store.removeUnused(today, {ids[1]}), std::vector<std::int64_t>{ids[1]});
+  EXPECT_EQ(store.stats().textures, 3u);  // imported, yesterday's, patch 2's base
+  // The same pixels stored again get a new texture.
+  Commit again;
+  again.textures = {first.textures[0]};
+  EXPECT_GT(store.commit(again).at(0), ids[0]);
+}
+
 using InstanceKey = std::tuple<std::int64_t, int, int, int, std::int64_t, bool>;
 inline std::set<InstanceKey> keysOf(const std::vector<TextureInstance>& instances) {
   std::set<InstanceKey> keys;

@@ -149,6 +149,65 @@ TEST(CcvIndex, VectorsAddedAfterTheBuildAreFoundBeforeAndAfterTheRebuild) {
   EXPECT_GE(found, 98);  // exact copies: the leaf holding the vector itself is searched first
 }
 
+// Removed vectors are never answered, in the tail, in the index and after the compaction that
+// enough removals bring; what is left answers as a linear scan over it.
+TEST(CcvIndex, RemovedVectorsAreNeverFound) {
+  std::mt19937 random(14);
+  CcvIndex index(kDims);
+  std::vector<std::vector<float>> all;
+  for (int i = 0; i < 1200; ++i) {
+    all.push_back(randomCcv(random));
+    index.add(i, all.back());
+  }
+  // Ids stay positions in `all`; a removed one's row there moves far from every query.
+  const std::vector<float> far(kDims, 1e3F);
+  const auto removeEvery = [&](int step, int offset) {
+    for (int i = offset; i < 1200; i += step) {
+      if (all[static_cast<std::size_t>(i)] == far) continue;
+      EXPECT_TRUE(index.remove(i));
+      all[static_cast<std::size_t>(i)] = far;
+    }
+  };
+  removeEvery(10, 3);  // 120 removed: below the compaction threshold (256)
+  EXPECT_EQ(index.size(), 1080u);
+  EXPECT_FALSE(index.remove(3));  // already gone
+  EXPECT_FALSE(index.remove(5000));
+  for (int i = 3; i < 1200; i += 50) {
+    // Its own vector asked for: anything but itself.
+    for (const CcvNeighbour& n : index.query(all[static_cast<std::size_t>(i + 1)], 2.0, 20)) {
+      EXPECT_NE(n.id % 10, 3) << n.id;
+    }
+  }
+  removeEvery(3, 0);  // past the threshold: compacted and rebuilt
+  const std::size_t kept = static_cast<std::size_t>(
+      std::count_if(all.begin(), all.end(), [&](const auto& v) { return v != far; }));
+  EXPECT_EQ(index.size(), kept);
+  int asked = 0, same = 0;
+  for (std::size_t id = 1; id < all.size(); id += 7) {
+    const bool gone = all[id] == far;
+    const std::vector<float> query = gone ? randomCcv(random) : perturbed(all[id], random);
+    const auto got = index.query(query, 2.0, 5);
+    for (const CcvNeighbour& n : got) EXPECT_NE(all[static_cast<std::size_t>(n.id)], far) << n.id;
+    if (gone) continue;  // a random query: only that nothing removed comes back
+    const auto want = linearScan(all, query, 2.0, 1);
+    ++asked;
+    if (!got.empty() && got[0].id == want.at(0).id) ++same;
+  }
+  EXPECT_GE(same, asked * 95 / 100) << asked;  // as an index that never removed anything
+  // Below the index threshold again: exact.
+  for (int i = 0; i < 1200; ++i) {
+    if (all[static_cast<std::size_t>(i)] != far && i % 4 != 0) {
+      index.remove(i);
+      all[static_cast<std::size_t>(i)] = far;
+    }
+  }
+  ASSERT_LT(index.size(), 256u);
+  for (int q = 0; q < 20; ++q) {
+    const std::vector<float> query = randomCcv(random);
+    expectSame(index.query(query, 2.0, 10), linearScan(all, query, 2.0, 10));
+  }
+}
+
 TEST(CcvIndex, WrongLengthsThrowAndMovingKeepsTheContents) {
   EXPECT_THROW(CcvIndex(0), core::Error);
   CcvIndex index(4);

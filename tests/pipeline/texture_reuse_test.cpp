@@ -91,6 +91,12 @@ TEST(TextureReuse, TheSecondTableReusesTheFirstAndOneOrTwoThreadsStoreTheSame) {
   EXPECT_EQ(one.commits.ccv_considered, two.commits.ccv_considered);
   EXPECT_EQ(one.commits.ccv_removed, two.commits.ccv_removed);
   EXPECT_EQ(instancesOf(root / "one/textures.db"), instancesOf(root / "two/textures.db"));
+  // A patch finalized again leaves none of its older versions' textures behind: every texture
+  // stored is used, and the report counts the ones removed.
+  EXPECT_EQ(one.commits.textures_removed, two.commits.textures_removed);
+  const auto stored = db::openSqliteStore(root / "two/textures.db", {false, true})->textures();
+  EXPECT_EQ(stored.size(), two.commits.textures_stored - two.commits.textures_removed);
+  for (const db::TextureSummary& texture : stored) EXPECT_GT(texture.uses, 0u) << texture.id;
   // Every stage saw the frames in the source's order, with one thread or two.
   EXPECT_EQ(readText(root / "one/trajectory.txt"), readText(root / "two/trajectory.txt"));
   EXPECT_TRUE(timestampsAscend(root / "two/trajectory.txt"));

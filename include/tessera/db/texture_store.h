@@ -79,6 +79,15 @@ class TextureStore {
   // that commit is then stored.
   virtual std::vector<std::int64_t> commit(const Commit& commit) = 0;
 
+  // Removes those of `candidates` that run `run_id` stored and that no instance of any run
+  // uses, in one transaction; returns the ids removed, ascending. A run calls it with the
+  // textures a patch's older version used, once the newer version is committed, so that a
+  // surface finalized again does not leave its superseded textures stored. Imported textures
+  // and other runs' are never removed. Throws core::Error naming the database when it cannot
+  // (then nothing is removed).
+  virtual std::vector<std::int64_t> removeUnused(std::int64_t run_id,
+                                                 const std::vector<std::int64_t>& candidates) = 0;
+
   // The id of a stored texture with these pixels (contentKey), if any.
   virtual std::optional<std::int64_t> findByContentKey(const std::string& key) const = 0;
   // A whole texture (pixels, features, lattice), or nothing for an unknown id.

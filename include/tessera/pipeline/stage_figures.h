@@ -129,6 +129,7 @@ struct BitmapFigures {
 struct CommitFigures {
   std::size_t textures_stored = 0;  // new textures this run stored (versions included)
   std::size_t patterns_stored = 0;
+  std::size_t textures_removed = 0;  // of those, removed again: superseded, no instance left
   std::size_t commit_failures = 0;
   std::size_t retirements = 0;  // patches merged into another: their instances removed
   std::size_t ccv_considered = 0, ccv_removed = 0;

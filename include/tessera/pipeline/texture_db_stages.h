@@ -101,7 +101,9 @@ struct CommitMessage {
 
 // Serial, in finalization order: plans each patch's commit against every texture stored so
 // far (reuse::planCommit), stores the plan in one transaction and remembers the map's
-// instances.
+// instances. The textures this run stored for a patch's older version (or a retired patch),
+// once no instance uses them, are removed from the database and the catalog: a surface
+// finalized again on every revisit does not pile up its superseded bitmaps.
 class CommitStage {
  public:
   CommitStage(db::TextureStore& store, reuse::StoreCatalog& catalog,
@@ -121,6 +123,9 @@ class CommitStage {
   const StageTimer& timer() const { return timer_; }
 
  private:
+  // Removes those of `superseded` the store can (TextureStore::removeUnused) from the catalog.
+  void removeUnused(const std::vector<std::int64_t>& superseded);
+
   db::TextureStore& store_;
   reuse::StoreCatalog& catalog_;
   reuse::CommitRules rules_;

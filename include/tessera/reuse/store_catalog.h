@@ -33,6 +33,8 @@ class StoreCatalog : public match::TextureCatalog {
 
   // After a commit.
   void add(std::shared_ptr<const match::StoredTexture> texture);
+  // After the store removed texture `id` (TextureStore::removeUnused): no longer a candidate.
+  void remove(std::int64_t id);
   // Bytes of the textures held in memory now.
   std::size_t cachedBytes() const { return cached_bytes_; }
 

@@ -36,6 +36,8 @@ class PostgresStore final : public TextureStore {
   std::int64_t beginRun(const std::string& source) override;
   void finishRun(std::int64_t run_id) override;
   std::vector<std::int64_t> commit(const Commit& commit) override;
+  std::vector<std::int64_t> removeUnused(std::int64_t run_id,
+                                         const std::vector<std::int64_t>& candidates) override;
 
   std::optional<std::int64_t> findByContentKey(const std::string& key) const override;
   std::optional<TextureRecord> texture(std::int64_t id) const override;
@@ -70,6 +72,7 @@ class PostgresStore final : public TextureStore {
   int schema_version_ = kSchemaVersion;
   std::mutex write_mutex_;
   bool read_only_ = false;
+  bool may_remove_ = true;                    // false once the role was refused DELETE on textures
   std::unique_ptr<pqxx::connection> writer_;  // null until the first write, or after a break
   mutable ConnectionPool<pqxx::connection> pool_;  // idle readers
 };

@@ -30,6 +30,8 @@ class QueuedServerStore final : public TextureStore {
   // away, the run's end is queued too and the journal named in a warning.
   void finishRun(std::int64_t run_id) override;
   std::vector<std::int64_t> commit(const Commit& commit) override;
+  std::vector<std::int64_t> removeUnused(std::int64_t run_id,
+                                         const std::vector<std::int64_t>& candidates) override;
 
   std::optional<std::int64_t> findByContentKey(const std::string& key) const override;
   std::optional<TextureRecord> texture(std::int64_t id) const override;

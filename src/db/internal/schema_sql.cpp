@@ -88,4 +88,13 @@ std::string instancesIndexSql() {
   return "CREATE INDEX instances_by_texture ON instances (texture_id);";
 }
 
+std::string removeUnusedTextureSql(SqlDialect dialect) {
+  // instances_by_texture makes the NOT EXISTS one index look-up.
+  constexpr const char* kRemove =
+      "DELETE FROM textures WHERE id = {0} AND run_id = {1} AND NOT EXISTS (SELECT 1 FROM "
+      "instances WHERE instances.texture_id = textures.id)";
+  return dialect == SqlDialect::kPostgres ? fmt::format(kRemove, "$1", "$2")
+                                          : fmt::format(kRemove, "?1", "?2");
+}
+
 }  // namespace tessera::db::internal

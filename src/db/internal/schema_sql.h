@@ -17,4 +17,8 @@ std::string coreTablesSql(SqlDialect dialect);
 std::string instancesTableSql(SqlDialect dialect, const std::string& name);
 std::string instancesIndexSql();
 
+// Removes one texture (parameter 1) when run parameter 2 stored it and no instance uses it
+// (TextureStore::removeUnused).
+std::string removeUnusedTextureSql(SqlDialect dialect);
+
 }  // namespace tessera::db::internal

@@ -28,6 +28,8 @@ class SqliteStore final : public TextureStore {
   std::int64_t beginRun(const std::string& source) override;
   void finishRun(std::int64_t run_id) override;
   std::vector<std::int64_t> commit(const Commit& commit) override;
+  std::vector<std::int64_t> removeUnused(std::int64_t run_id,
+                                         const std::vector<std::int64_t>& candidates) override;
 
   std::optional<std::int64_t> findByContentKey(const std::string& key) const override;
   std::optional<TextureRecord> texture(std::int64_t id) const override;
