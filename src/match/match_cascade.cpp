@@ -316,8 +316,36 @@ std::string MatchConfig::refusal(const Fidelity& fidelity) const {
   return {};
 }
 
-MatchDecision MatchCascade::match(const TextureDescription& query,
-                                  const TextureCatalog& catalog) const {
+MatchDecision MatchCascade::match(const TextureDescription& query, const TextureCatalog& catalog,
+                                  const PrecheckedVerdicts* prechecked) const {
+  return run(query, catalog, prechecked, nullptr);
+}
+
+PrecheckedVerdicts MatchCascade::precheck(const TextureDescription& query,
+                                          const TextureCatalog& catalog) const {
+  PrecheckedVerdicts seen;
+  seen.ms = run(query, catalog, nullptr, &seen).ms;
+  return seen;
+}
+
+namespace {
+
+// The verdict `prechecked` holds for exactly `stored` (the same object: an id alone could name
+// a texture stored after another was removed).
+const CandidateVerdict* verdictFor(const PrecheckedVerdicts* prechecked,
+                                   const StoredTexture& stored) {
+  if (prechecked == nullptr) return nullptr;
+  for (const auto& [texture, verdict] : prechecked->verdicts) {
+    if (texture.lock().get() == &stored) return &verdict;
+  }
+  return nullptr;
+}
+
+}  // namespace
+
+MatchDecision MatchCascade::run(const TextureDescription& query, const TextureCatalog& catalog,
+                                const PrecheckedVerdicts* prechecked,
+                                PrecheckedVerdicts* seen) const {
   const auto start = std::chrono::steady_clock::now();
   MatchDecision decision;
   decision.considered = catalog.size();
@@ -327,7 +355,11 @@ MatchDecision MatchCascade::match(const TextureDescription& query,
   for (const CcvNeighbour& candidate : candidates) {
     const std::shared_ptr<const StoredTexture> stored = catalog.load(candidate.id);
     if (!stored) continue;
-    CandidateVerdict verdict = tryCandidate(query, *stored, candidate.distance);
+    const CandidateVerdict* known = verdictFor(prechecked, *stored);
+    CandidateVerdict verdict =
+        known != nullptr ? *known : tryCandidate(query, *stored, candidate.distance);
+    verdict.ccv_distance = candidate.distance;
+    if (seen != nullptr) seen->verdicts.emplace_back(stored, verdict);
     decision.verdicts.push_back(verdict);
     if (verdict.accepted) {
       decision.match = std::move(verdict);

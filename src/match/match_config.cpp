@@ -26,6 +26,7 @@ void readConfig(const core::ConfigSection& section, MatchConfig& config) {
   section.read("min_coverage", config.min_coverage);
   section.read("describe_max_px", config.describe_max_px);
   section.read("catalog_cache_mb", config.catalog_cache_mb);
+  section.read("precheck", config.precheck);
   if (config.catalog_cache_mb < 0.0)
     throw core::ConfigError("match: catalog_cache_mb must be >= 0");
   if (config.ccv.levels < 2 || config.ccv.levels > 16) {

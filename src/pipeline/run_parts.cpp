@@ -55,7 +55,7 @@ RunParts::RunParts(core::FrameSource& input, const RunConfig& config, const RunO
       store(openStore(options)),
       run_id(store->beginRun(input.name())),
       catalog(*store, config.match),
-      describe(config.textures, config.match, config.pattern),
+      describe(config.textures, config.match, config.pattern, &catalog),
       commit(*store, catalog, {config.match, config.pattern, run_id}),
       stages(source_stage, tracking, integration, planes, describe, commit, bitmaps, sink,
              loop_closer.get(), options.listener, config.pipeline.return_freed_memory_s) {

@@ -37,6 +37,7 @@ void PatchCommitFigures::addTo(json& line) const {
   line["bitmap_ms"] = bitmap_ms;
   line["describe_ms"] = describe_ms;
   line["match_ms"] = match_ms;
+  line["precheck_ms"] = precheck_ms;
   line["pattern_ms"] = pattern_ms;
   line["commit_latency_ms"] = commit_latency_ms;
   line["ccv_considered"] = ccv_considered;

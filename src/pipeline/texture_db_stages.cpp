@@ -78,6 +78,14 @@ DescribedPatch DescribeStage::describe(const PatchJob& job) const {
     spdlog::warn("patch {} version {}: not matched: {}", bitmap.id, bitmap.version, e.what());
     return described;
   }
+  if (catalog_ != nullptr && match_.precheck) {
+    try {
+      described.prechecked =
+          match::MatchCascade(match_).precheck(*described.description, *catalog_);
+    } catch (const std::exception& e) {  // the commit then verifies every candidate itself
+      spdlog::debug("patch {} version {}: no precheck: {}", bitmap.id, bitmap.version, e.what());
+    }
+  }
   if (!patterns_.enabled) return described;
   try {
     pattern::PatternAnalysis analysis = pattern::analysePattern(
@@ -125,9 +133,12 @@ CommitRecord CommitStage::process(DescribedPatch described) {
 
   // Against every texture the patches before this one stored: the outcome does not depend on
   // the threads' timing.
+  const match::PrecheckedVerdicts* prechecked =
+      described.prechecked ? &*described.prechecked : nullptr;
+  figures.precheck_ms = prechecked != nullptr ? prechecked->ms : 0.0;
   reuse::CommitPlan plan = reuse::planCommit(
       bitmap, *described.description, described.pattern, catalog_,
-      [this](const std::string& key) { return store_.findByContentKey(key); }, rules_);
+      [this](const std::string& key) { return store_.findByContentKey(key); }, rules_, prechecked);
   record.method = plan.method;
   figures.match_ms = plan.match_ms;
   figures.pattern_ms += plan.layers_ms;

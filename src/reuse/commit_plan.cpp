@@ -162,7 +162,7 @@ CommitPlan planCommit(const texture::PatchBitmap& bitmap,
                       const match::TextureDescription& description,
                       const std::optional<pattern::Pattern>& found,
                       const match::TextureCatalog& catalog, const StoredPixels& stored_pixels,
-                      const CommitRules& rules) {
+                      const CommitRules& rules, const match::PrecheckedVerdicts* prechecked) {
   CommitPlan plan;
   PlanWriter writer(plan, stored_pixels, rules.run_id);
   if (!rules.match.enabled) {
@@ -172,7 +172,7 @@ CommitPlan planCommit(const texture::PatchBitmap& bitmap,
   const match::MatchCascade cascade(rules.match);
   match::MatchDecision decision;
   try {
-    decision = cascade.match(description, catalog);
+    decision = cascade.match(description, catalog, prechecked);
   } catch (const std::exception& e) {  // one patch's failure costs its matching, not the run
     spdlog::warn("patch {} version {}: not matched: {}", bitmap.id, bitmap.version, e.what());
   }

@@ -49,8 +49,19 @@ StoreCatalog::StoreCatalog(const db::TextureStore& store, const match::MatchConf
   }
 }
 
+std::size_t StoreCatalog::size() const {
+  const std::lock_guard lock(mutex_);
+  return size_;
+}
+
+std::size_t StoreCatalog::cachedBytes() const {
+  const std::lock_guard lock(mutex_);
+  return cached_bytes_;
+}
+
 std::vector<match::CcvNeighbour> StoreCatalog::nearest(const std::vector<float>& ccv,
                                                        double max_distance, std::size_t k) const {
+  const std::lock_guard lock(mutex_);
   return index_.query(ccv, max_distance, k);
 }
 
@@ -87,15 +98,28 @@ void StoreCatalog::hold(std::shared_ptr<const match::StoredTexture> texture) con
   }
 }
 
+std::shared_ptr<const match::StoredTexture> StoreCatalog::cached(std::int64_t id) const {
+  const auto it = cache_.find(id);
+  if (it == cache_.end()) return nullptr;
+  recency_.splice(recency_.begin(), recency_, it->second.recency);
+  return it->second.texture;
+}
+
 std::shared_ptr<const match::StoredTexture> StoreCatalog::load(std::int64_t id) const {
-  if (const auto it = cache_.find(id); it != cache_.end()) {
-    recency_.splice(recency_.begin(), recency_, it->second.recency);
-    return it->second.texture;
+  std::size_t removals = 0;
+  {
+    const std::lock_guard lock(mutex_);
+    if (auto texture = cached(id)) return texture;
+    removals = removals_;
   }
+  // Read and described unlocked: other threads' look-ups need not wait for it.
   const std::optional<db::TextureRecord> record = store_.texture(id);
   if (!record) return nullptr;
   std::shared_ptr<const match::StoredTexture> texture = storedTextureOf(*record, config_);
-  hold(texture);
+  const std::lock_guard lock(mutex_);
+  if (auto meanwhile = cached(id)) return meanwhile;  // added or loaded by another thread
+  // A texture removed meanwhile is not cached: its id may come back for another one.
+  if (removals == removals_) hold(texture);
   return texture;
 }
 
@@ -120,6 +144,7 @@ ShownPatch shownPatch(std::size_t pixels, const std::vector<db::TextureInstance>
 }
 
 void StoreCatalog::add(std::shared_ptr<const match::StoredTexture> texture) {
+  const std::lock_guard lock(mutex_);
   // Undescribed (match.enabled false): kept for export, never a candidate.
   if (!texture->description.ccv.values.empty()) {
     index_.add(texture->id, texture->description.ccv.values);
@@ -129,6 +154,8 @@ void StoreCatalog::add(std::shared_ptr<const match::StoredTexture> texture) {
 }
 
 void StoreCatalog::remove(std::int64_t id) {
+  const std::lock_guard lock(mutex_);
+  ++removals_;
   if (index_.remove(id)) --size_;
   if (const auto it = cache_.find(id); it != cache_.end()) {
     cached_bytes_ -= it->second.bytes;

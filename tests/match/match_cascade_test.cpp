@@ -64,6 +64,48 @@ TEST(MatchCascade, ATurnedCropOfAStoredTextureReusesItWithTheRightTransform) {
   EXPECT_EQ(decision.considered, 2u);
 }
 
+// Verdicts worked out ahead (on a describing thread) decide as verifying at the commit would,
+// and are taken only for the very textures they were reached against.
+TEST(MatchCascade, PrecheckedVerdictsDecideAsVerifyingAgainAndOnlyForTheSameTextures) {
+  cv::setRNGSeed(3);
+  const MatchConfig config;
+  const cv::Mat big = texture(400, 300, 5);
+  MemoryCatalog catalog(config.ccv);
+  catalog.add(stored(1, texture(400, 300, 99), false, config));
+  catalog.add(stored(2, big, false, config));
+  const Rendered crop = renderThrough(
+      big, cv::Mat(), core::Similarity2::fromAngleScale(0.5, 1.0, 200.0, 40.0), 160, 120, false);
+  const TextureDescription query = describeTexture(crop.rgb, crop.covered, config);
+  const MatchCascade cascade(config);
+  const MatchDecision fresh = cascade.match(query, catalog);
+  ASSERT_TRUE(fresh.match.has_value());
+  PrecheckedVerdicts ahead = cascade.precheck(query, catalog);
+  ASSERT_EQ(ahead.verdicts.size(), fresh.verdicts.size());
+  const MatchDecision taken = cascade.match(query, catalog, &ahead);
+  ASSERT_TRUE(taken.match.has_value());
+  EXPECT_EQ(taken.match->id, fresh.match->id);
+  EXPECT_EQ(taken.match->psnr_db, fresh.match->psnr_db);
+  EXPECT_EQ(taken.match->transform->tx, fresh.match->transform->tx);
+  EXPECT_EQ(taken.verdicts.size(), fresh.verdicts.size());
+
+  // A verdict is taken, not worked out again: a refusal planted in it refuses.
+  for (auto& [texture, verdict] : ahead.verdicts) {
+    verdict.accepted = false;
+    verdict.reason = "planted";
+  }
+  const MatchDecision planted = cascade.match(query, catalog, &ahead);
+  EXPECT_FALSE(planted.match.has_value());
+  ASSERT_FALSE(planted.verdicts.empty());
+  EXPECT_EQ(planted.verdicts.front().reason, "planted");
+  // The same ids, other objects (a texture removed and another stored under its id): verified.
+  MemoryCatalog again(config.ccv);
+  again.add(stored(1, texture(400, 300, 99), false, config));
+  again.add(stored(2, big, false, config));
+  const MatchDecision verified = cascade.match(query, again, &ahead);
+  ASSERT_TRUE(verified.match.has_value());
+  EXPECT_EQ(verified.match->psnr_db, fresh.match->psnr_db);
+}
+
 TEST(MatchCascade, ATurnedAndShiftedRepetitionOfAPatternTileIsFoundByCrossCorrelation) {
   const MatchConfig config;
   const cv::Mat tile = texture(48, 32, 7);

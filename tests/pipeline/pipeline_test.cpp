@@ -495,6 +495,7 @@ TEST(RunConfig, DefaultYamlDocumentsEveryKeyWithTheStructDefaults) {
   EXPECT_EQ(from_file.patches.colour_every_n_frames, defaults.patches.colour_every_n_frames);
   EXPECT_EQ(from_file.patches.tile_m, defaults.patches.tile_m);
   EXPECT_EQ(from_file.match.catalog_cache_mb, defaults.match.catalog_cache_mb);
+  EXPECT_EQ(from_file.match.precheck, defaults.match.precheck);
   EXPECT_EQ(from_file.tracker.iterations_per_level, defaults.tracker.iterations_per_level);
   EXPECT_EQ(from_file.tracker.max_translation_m, defaults.tracker.max_translation_m);
   EXPECT_EQ(from_file.tracker.max_rotation_deg, defaults.tracker.max_rotation_deg);

@@ -41,6 +41,7 @@ struct FrameFigures {
 // monitor's commit figures.
 struct PatchCommitFigures {
   double bitmap_ms = 0.0, describe_ms = 0.0, match_ms = 0.0, pattern_ms = 0.0;
+  double precheck_ms = 0.0;        // the cascade ahead of the commit, on a describing thread
   double commit_latency_ms = 0.0;  // finalization to commit
   std::size_t ccv_considered = 0, ccv_removed = 0;
   void addTo(nlohmann::json& line) const;

@@ -1,9 +1,11 @@
 #pragma once
-// The stages after texturing: each finalized patch's bitmap is built, described and searched
-// for a periodic pattern (many patches at once: none of it reads the database), then matched
-// against the texture database and committed one patch at a time, in finalization order. Each
-// patch is matched against every texture the patches before it stored, so the same texture is
-// never stored twice and the result does not depend on how many threads ran or how fast.
+// The stages after texturing: each finalized patch's bitmap is built, described, searched for
+// a periodic pattern and checked ahead against the database as it is then (many patches at
+// once: none of it writes the database), then matched against the texture database and
+// committed one patch at a time, in finalization order. Each patch is matched against every
+// texture the patches before it stored (the checks ahead only save verifying a candidate
+// again), so the same texture is never stored twice and the result does not depend on how
+// many threads ran or how fast.
 #include <chrono>
 #include <cstddef>
 #include <cstdint>
@@ -53,6 +55,8 @@ struct DescribedPatch {
   std::optional<texture::PatchBitmap> bitmap;  // nothing when it could not be built
   std::optional<match::TextureDescription> description;
   std::optional<pattern::Pattern> pattern;  // in bitmap texels; looked for when enabled
+  // The cascade's verdicts against the database as it was once described (match enabled).
+  std::optional<match::PrecheckedVerdicts> prechecked;
   double describe_ms = 0.0;                 // CCV and features of the new bitmap
   double pattern_ms = 0.0;                  // the autocorrelation analysis
   double cpu_ms = 0.0;                      // all of it, on the describing thread
@@ -65,13 +69,16 @@ struct DescribedPatch {
   Batch batchInfo() const { return {batch, batch_size, frame_index}; }
 };
 
-// Builds each patch's bitmap, describes it (CCV, features) and looks for a periodic pattern in
-// it. Thread-safe: many patches at once.
+// Builds each patch's bitmap, describes it (CCV, features), looks for a periodic pattern in
+// it and, given a catalog, runs the matching cascade ahead against it (the serial commit then
+// takes the verdicts of candidates that have not changed meanwhile). Thread-safe: many
+// patches at once.
 class DescribeStage {
  public:
   DescribeStage(const texture::BitmapConfig& bitmaps, const match::MatchConfig& match,
-                const pattern::PatternStageConfig& patterns)
-      : bitmaps_(bitmaps), match_(match), patterns_(patterns) {}
+                const pattern::PatternStageConfig& patterns,
+                const match::TextureCatalog* catalog = nullptr)
+      : bitmaps_(bitmaps), match_(match), patterns_(patterns), catalog_(catalog) {}
   DescribedPatch process(const PatchJob& job) const;
 
  private:
@@ -80,6 +87,7 @@ class DescribeStage {
   texture::BitmapConfig bitmaps_;
   match::MatchConfig match_;
   pattern::PatternStageConfig patterns_;
+  const match::TextureCatalog* catalog_;  // thread-safe, or null: no precheck
 };
 
 // What one commit decided, for stats.jsonl.

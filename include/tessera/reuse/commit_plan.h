@@ -51,12 +51,14 @@ struct CommitPlan {
 };
 
 // Plans the commit of `bitmap`, described by `description` (with `found`, the periodic
-// pattern in it when one was found), against `catalog`. Never throws for a failed match or
-// layer plan (logged; the bitmap is then stored whole).
+// pattern in it when one was found), against `catalog`; `prechecked` (MatchCascade::precheck)
+// saves verifying again what it verified, with the same plan. Never throws for a failed match
+// or layer plan (logged; the bitmap is then stored whole).
 CommitPlan planCommit(const texture::PatchBitmap& bitmap,
                       const match::TextureDescription& description,
                       const std::optional<pattern::Pattern>& found,
                       const match::TextureCatalog& catalog, const StoredPixels& stored_pixels,
-                      const CommitRules& rules);
+                      const CommitRules& rules,
+                      const match::PrecheckedVerdicts* prechecked = nullptr);
 
 }  // namespace tessera::reuse

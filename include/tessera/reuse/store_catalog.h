@@ -6,6 +6,7 @@
 #include <list>
 #include <map>
 #include <memory>
+#include <mutex>
 #include <vector>
 
 #include "tessera/db/texture_store.h"
@@ -16,12 +17,12 @@ namespace tessera::reuse {
 
 // The database's textures: their CCVs in an index, the textures themselves loaded on demand
 // and kept, least recently used out first beyond MatchConfig::catalog_cache_mb (at least one).
-// Not thread-safe: read and written by the commit stage only.
+// Thread-safe: the commit stage writes it while the describing threads look up candidates.
 class StoreCatalog : public match::TextureCatalog {
  public:
   StoreCatalog(const db::TextureStore& store, const match::MatchConfig& config);
 
-  std::size_t size() const override { return size_; }
+  std::size_t size() const override;
   std::vector<match::CcvNeighbour> nearest(const std::vector<float>& ccv, double max_distance,
                                            std::size_t k) const override;
   std::shared_ptr<const match::StoredTexture> load(std::int64_t id) const override;
@@ -36,12 +37,14 @@ class StoreCatalog : public match::TextureCatalog {
   // After the store removed texture `id` (TextureStore::removeUnused): no longer a candidate.
   void remove(std::int64_t id);
   // Bytes of the textures held in memory now.
-  std::size_t cachedBytes() const { return cached_bytes_; }
+  std::size_t cachedBytes() const;
 
  private:
   // Holds `texture` as the most recently used, dropping the least recently used beyond the
-  // budget (never the one just held).
+  // budget (never the one just held). The caller holds mutex_.
   void hold(std::shared_ptr<const match::StoredTexture> texture) const;
+  // The cached texture `id`, now the most recently used, or null. The caller holds mutex_.
+  std::shared_ptr<const match::StoredTexture> cached(std::int64_t id) const;
 
   struct Cached {
     std::shared_ptr<const match::StoredTexture> texture;
@@ -50,11 +53,13 @@ class StoreCatalog : public match::TextureCatalog {
   };
   const db::TextureStore& store_;
   match::MatchConfig config_;
+  mutable std::mutex mutex_;  // everything below
   match::CcvIndex index_;
   std::size_t size_ = 0;
   mutable std::map<std::int64_t, Cached> cache_;
   mutable std::list<std::int64_t> recency_;  // most recently used first
   mutable std::size_t cached_bytes_ = 0;
+  std::size_t removals_ = 0;  // remove() calls so far
 };
 
 // A patch of `pixels` texels as the map shows it: through `stored` (loadLayers of `layers`),
