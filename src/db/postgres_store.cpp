@@ -343,9 +343,9 @@ std::vector<std::int64_t> PostgresStore::removeUnused(std::int64_t run_id,
   const std::lock_guard lock(write_mutex_);
   if (candidates.empty() || !may_remove_) return removed;
   try {
-    // An instance another process commits at the same time either finds the texture (the
-    // removal then waits for its key-share lock, sees the instance and keeps the row) or the
-    // foreign key refuses that instance: never an instance of a removed texture.
+    // Another process committing an instance of a candidate at the same time: the foreign key
+    // refuses whichever of the two comes second (that instance, or this removal, which then
+    // removes nothing). Never an instance of a removed texture.
     onConnection(writer_, [&](pqxx::connection& db) {
       removed.clear();
       pqxx::work tx(db);
