@@ -150,11 +150,14 @@ int runCommand(const RunArguments& args) {
       spdlog::info("ATE against the recording's ground truth: {:.1f} mm RMSE over {} poses",
                    summary.ate->rmse_m * 1e3, summary.ate->pairs);
     }
+    const std::size_t removed = summary.commits.textures_removed;
     spdlog::info(
-        "textures: {} patches textured, {} reuse a stored texture, {} new textures in {}; "
+        "textures: {} patches textured, {} reuse a stored texture, {} new textures in {}{}; "
         "{:.2f} MB before, {:.2f} MB after reuse",
-        summary.economy.textured_patches, summary.economy.reuses, summary.commits.textures_stored,
-        summary.database.location, 3e-6 * static_cast<double>(summary.economy.pixels_before),
+        summary.economy.textured_patches, summary.economy.reuses,
+        summary.commits.textures_stored - removed, summary.database.location,
+        removed > 0 ? fmt::format(" ({} more removed: older versions of patches)", removed) : "",
+        3e-6 * static_cast<double>(summary.economy.pixels_before),
         3e-6 * static_cast<double>(summary.economy.pixels_after));
     // As the method's paper tabulates its runs.
     spdlog::info(
