@@ -150,7 +150,9 @@ int runCommand(const RunArguments& args) {
       spdlog::info("ATE against the recording's ground truth: {:.1f} mm RMSE over {} poses",
                    summary.ate->rmse_m * 1e3, summary.ate->pairs);
     }
-    const std::size_t removed = summary.commits.textures_removed;
+    const std::size_t removed =
+        summary.commits.textures_removed +
+        (summary.database.server_link ? summary.database.server_link->removed_at_end : 0);
     spdlog::info(
         "textures: {} patches textured, {} reuse a stored texture, {} new textures in {}{}; "
         "{:.2f} MB before, {:.2f} MB after reuse",

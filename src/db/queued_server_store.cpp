@@ -113,10 +113,18 @@ std::vector<std::int64_t> QueuedServerStore::commit(const Commit& commit) {
 std::vector<std::int64_t> QueuedServerStore::removeUnused(
     std::int64_t run_id, const std::vector<std::int64_t>& candidates) {
   // Only once the server has every commit: a queued commit may still use a candidate, and a
-  // texture still in the journal has no server id yet. What is not removed now stays stored
-  // unused, which costs space, not correctness.
+  // texture still in the journal has no server id yet. Until then they wait for the run's end.
   const std::lock_guard lock(mutex_);
-  if (down_ || journal_->entries() > 0) return {};
+  if (down_ || journal_->entries() > 0) {
+    std::vector<std::int64_t>& later = deferred_removals_[run_id];
+    later.insert(later.end(), candidates.begin(), candidates.end());
+    return {};
+  }
+  return removeOnServer(run_id, candidates);
+}
+
+std::vector<std::int64_t> QueuedServerStore::removeOnServer(
+    std::int64_t run_id, const std::vector<std::int64_t>& candidates) {
   std::map<std::int64_t, std::int64_t> given;  // server id -> the id the caller knows
   std::vector<std::int64_t> on_server;
   for (const std::int64_t id : candidates) {
@@ -131,8 +139,11 @@ std::vector<std::int64_t> QueuedServerStore::removeUnused(
       removed.push_back(given.at(id));
     }
   } catch (const ServerUnavailable& e) {
-    // Not an outage to queue for: the next commit finds out. They stay stored for now.
-    spdlog::debug("{}: unused textures not removed: {}", server_->location(), e.what());
+    // Not an outage to queue for: the next commit finds out. They are tried again at the run's
+    // end; what is still stored then stays, unused, until the owner's `tessera db prune`.
+    spdlog::debug("{}: unused textures not removed yet: {}", server_->location(), e.what());
+    std::vector<std::int64_t>& later = deferred_removals_[run_id];
+    later.insert(later.end(), candidates.begin(), candidates.end());
   }
   std::sort(removed.begin(), removed.end());
   return removed;
@@ -142,6 +153,10 @@ void QueuedServerStore::finishRun(std::int64_t run_id) {
   std::unique_lock lock(mutex_);
   emptied_.wait_for(lock, finish_wait_, [&] { return journal_->entries() == 0; });
   if (journal_->entries() == 0) {
+    if (const auto later = deferred_removals_.extract(run_id)) {
+      // The run commits nothing more, so none of these can be wanted again.
+      link_.removed_at_end += removeOnServer(run_id, later.mapped()).size();
+    }
     try {
       server_->finishRun(run_id);
       return;

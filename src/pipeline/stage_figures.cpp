@@ -163,6 +163,7 @@ void DatabaseFigures::addTo(json& report) const {
                            {"replayed_textures", link.replayed_textures},
                            {"refused_commits", link.refused_commits},
                            {"pending_commits", link.pending_commits},
+                           {"removed_at_end", link.removed_at_end},
                            {"journal", link.journal}};
   }
 }

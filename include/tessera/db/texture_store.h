@@ -61,6 +61,8 @@ struct ServerLink {
   std::size_t replayed_textures = 0;  // new textures those carried
   std::size_t refused_commits = 0;    // replayed but refused by the server (logged)
   std::size_t pending_commits = 0;    // still in the journal: the server did not come back
+  std::size_t removed_at_end = 0;     // unused textures removed at the run's end, not at once,
+                                      // because commits were queued when they became unused
   std::string journal;                // the journal's path
 };
 

@@ -6,6 +6,7 @@
 // journal when the server is back. Reads of queued textures are answered from the journal.
 #include <chrono>
 #include <condition_variable>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <thread>
@@ -48,6 +49,10 @@ class QueuedServerStore final : public TextureStore {
   void noteOutage(const std::string& why);  // the caller holds mutex_
   void noteBack();                          // the caller holds mutex_
   Commit withServerIds(const Commit& commit) const;  // the caller holds mutex_
+  // Removes those of `candidates` the server has and no instance uses; returns the caller's
+  // ids of those removed. The caller holds mutex_ and has an empty journal.
+  std::vector<std::int64_t> removeOnServer(std::int64_t run_id,
+                                           const std::vector<std::int64_t>& candidates);
 
   std::unique_ptr<TextureStore> server_;
   std::unique_ptr<CommitJournal> journal_;
@@ -59,6 +64,8 @@ class QueuedServerStore final : public TextureStore {
   bool down_ = false;
   std::chrono::steady_clock::time_point down_since_;
   ServerLink link_;
+  // Per run, removal candidates that came while commits were queued: tried at the run's end.
+  std::map<std::int64_t, std::vector<std::int64_t>> deferred_removals_;
   std::thread sender_;
 };
 
