@@ -104,6 +104,18 @@ DescribedPatch DescribeStage::describe(const PatchJob& job) const {
   } catch (const std::exception& e) {  // then matched and stored without layers
     spdlog::warn("patch {} version {}: no pattern: {}", bitmap.id, bitmap.version, e.what());
   }
+  if (described.prechecked) {
+    try {
+      std::vector<match::CandidateVerdict> verdicts;
+      for (const auto& entry : described.prechecked->verdicts) verdicts.push_back(entry.second);
+      const match::MatchCascade cascade(match_);
+      described.layers = reuse::LayerPlanner(cascade, *catalog_, patterns_)
+                             .prepare(*described.description, described.pattern, verdicts);
+    } catch (const std::exception& e) {  // the commit then plans the layers itself
+      spdlog::debug("patch {} version {}: layers not prepared: {}", bitmap.id, bitmap.version,
+                    e.what());
+    }
+  }
   return described;
 }
 
@@ -135,10 +147,12 @@ CommitRecord CommitStage::process(DescribedPatch described) {
   // the threads' timing.
   const match::PrecheckedVerdicts* prechecked =
       described.prechecked ? &*described.prechecked : nullptr;
-  figures.precheck_ms = prechecked != nullptr ? prechecked->ms : 0.0;
+  figures.precheck_ms = (prechecked != nullptr ? prechecked->ms : 0.0) +
+                        (described.layers ? described.layers->ms : 0.0);
   reuse::CommitPlan plan = reuse::planCommit(
       bitmap, *described.description, described.pattern, catalog_,
-      [this](const std::string& key) { return store_.findByContentKey(key); }, rules_, prechecked);
+      [this](const std::string& key) { return store_.findByContentKey(key); }, rules_, prechecked,
+      described.layers ? &*described.layers : nullptr);
   record.method = plan.method;
   figures.match_ms = plan.match_ms;
   figures.pattern_ms += plan.layers_ms;

@@ -162,7 +162,8 @@ CommitPlan planCommit(const texture::PatchBitmap& bitmap,
                       const match::TextureDescription& description,
                       const std::optional<pattern::Pattern>& found,
                       const match::TextureCatalog& catalog, const StoredPixels& stored_pixels,
-                      const CommitRules& rules, const match::PrecheckedVerdicts* prechecked) {
+                      const CommitRules& rules, const match::PrecheckedVerdicts* prechecked,
+                      const PreparedLayers* prepared) {
   CommitPlan plan;
   PlanWriter writer(plan, stored_pixels, rules.run_id);
   if (!rules.match.enabled) {
@@ -185,7 +186,7 @@ CommitPlan planCommit(const texture::PatchBitmap& bitmap,
   }
   if (rules.patterns.enabled) {
     const Clock::time_point start = Clock::now();
-    const LayerPlanner planner(cascade, catalog, rules.patterns);
+    const LayerPlanner planner(cascade, catalog, rules.patterns, prepared);
     const std::optional<LayerPlan> layers =
         planLayers(bitmap, description, found, decision, planner);
     plan.layers_ms = msSince(start);

@@ -1,6 +1,7 @@
 #include "tessera/reuse/layer_plan.h"
 
 #include <algorithm>
+#include <chrono>
 
 #include <spdlog/spdlog.h>
 #include <opencv2/core.hpp>
@@ -105,26 +106,74 @@ match::Fidelity layeredFidelity(const match::TextureDescription& bitmap, const L
   return match::measureFidelity(bitmap.rgb, bitmap.mask, shown);
 }
 
+PreparedOverlay LayerPlanner::describeOverlay(const match::TextureDescription& bitmap,
+                                              const cv::Rect& box) const {
+  // The whole box: an object's plain background may pass for the base's colours texel by
+  // texel, yet it is the object's.
+  PreparedOverlay overlay;
+  overlay.box = box;
+  overlay.description =
+      match::describeTexture(bitmap.rgb(box).clone(), bitmap.mask(box).clone(), cascade_.config());
+  const cv::Mat empty = overlay.description.mask == 0;
+  if (cv::countNonZero(empty) > 0) {
+    cv::inpaint(overlay.description.rgb, empty, overlay.opaque_rgb, 3.0, cv::INPAINT_TELEA);
+  } else {
+    overlay.opaque_rgb = overlay.description.rgb;
+  }
+  return overlay;
+}
+
 std::vector<OverlayMatch> LayerPlanner::matchOverlays(const match::TextureDescription& bitmap,
                                                       const std::vector<cv::Rect>& boxes) const {
   std::vector<OverlayMatch> overlays;
   for (const cv::Rect& box : boxes) {
-    // The whole box: an object's plain background may pass for the base's colours texel by
-    // texel, yet it is the object's.
+    const PreparedOverlay* ready = nullptr;
+    if (prepared_ != nullptr) {
+      for (const PreparedOverlay& candidate : prepared_->overlays) {
+        if (candidate.box == box) ready = &candidate;
+      }
+    }
+    PreparedOverlay described;
+    if (ready == nullptr) described = describeOverlay(bitmap, box);
+    const PreparedOverlay& source = ready != nullptr ? *ready : described;
     OverlayMatch overlay;
     overlay.box = box;
-    overlay.description = match::describeTexture(bitmap.rgb(box).clone(), bitmap.mask(box).clone(),
-                                                 cascade_.config());
-    const cv::Mat empty = overlay.description.mask == 0;
-    if (cv::countNonZero(empty) > 0) {
-      cv::inpaint(overlay.description.rgb, empty, overlay.opaque_rgb, 3.0, cv::INPAINT_TELEA);
-    } else {
-      overlay.opaque_rgb = overlay.description.rgb;
-    }
-    overlay.decision = cascade_.match(overlay.description, catalog_);
+    overlay.description = source.description;
+    overlay.opaque_rgb = source.opaque_rgb;
+    overlay.decision = cascade_.match(overlay.description, catalog_,
+                                      ready != nullptr ? &ready->prechecked : nullptr);
     overlays.push_back(std::move(overlay));
   }
   return overlays;
+}
+
+PreparedLayers LayerPlanner::prepare(const match::TextureDescription& bitmap,
+                                     const std::optional<pattern::Pattern>& found,
+                                     const std::vector<match::CandidateVerdict>& verdicts) const {
+  const auto start = std::chrono::steady_clock::now();
+  // The commit's likely path only: a pattern's plan rarely fails, and a match needs no layers.
+  std::vector<cv::Rect> boxes;
+  const bool matched = std::any_of(verdicts.begin(), verdicts.end(),
+                                   [](const match::CandidateVerdict& v) { return v.accepted; });
+  if (found) {
+    boxes = overlayBoxes(found->overlays, bitmap.rgb.size(), patterns_);
+  } else if (!matched) {
+    if (std::optional<PartialReuse> partial = partialReuse(bitmap, verdicts)) {
+      boxes = std::move(partial->boxes);
+    }
+  }
+  PreparedLayers prepared;
+  for (const cv::Rect& box : boxes) {
+    const bool seen = std::any_of(prepared.overlays.begin(), prepared.overlays.end(),
+                                  [&](const PreparedOverlay& o) { return o.box == box; });
+    if (seen) continue;
+    PreparedOverlay overlay = describeOverlay(bitmap, box);
+    overlay.prechecked = cascade_.precheck(overlay.description, catalog_);
+    prepared.overlays.push_back(std::move(overlay));
+  }
+  prepared.ms =
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+  return prepared;
 }
 
 std::optional<LayerPlan> LayerPlanner::planPattern(const match::TextureDescription& bitmap,
@@ -151,7 +200,7 @@ std::optional<LayerPlan> LayerPlanner::planPattern(const match::TextureDescripti
   return judged(bitmap, std::move(plan));
 }
 
-std::optional<LayerPlan> LayerPlanner::planPartialReuse(
+std::optional<LayerPlanner::PartialReuse> LayerPlanner::partialReuse(
     const match::TextureDescription& bitmap,
     const std::vector<match::CandidateVerdict>& verdicts) const {
   // The candidate the cascade placed over most of the bitmap and refused for its fidelity or
@@ -183,10 +232,18 @@ std::optional<LayerPlan> LayerPlanner::planPartialReuse(
                   bitmap.rgb.rows);
     return std::nullopt;
   }
+  return PartialReuse{placed, overlayBoxes(regions.blobs, bitmap.rgb.size(), patterns_)};
+}
+
+std::optional<LayerPlan> LayerPlanner::planPartialReuse(
+    const match::TextureDescription& bitmap,
+    const std::vector<match::CandidateVerdict>& verdicts) const {
+  const std::optional<PartialReuse> partial = partialReuse(bitmap, verdicts);
+  if (!partial) return std::nullopt;
   LayerPlan plan;
-  plan.base_reuse = *placed;
+  plan.base_reuse = *partial->placed;
   plan.base_reuse->method += "+overlays";
-  plan.overlays = matchOverlays(bitmap, overlayBoxes(regions.blobs, bitmap.rgb.size(), patterns_));
+  plan.overlays = matchOverlays(bitmap, partial->boxes);
   return judged(bitmap, std::move(plan));
 }
 

@@ -1,7 +1,8 @@
 // The reuse decision against a catalog in memory, one test per branch of planCommit: a reuse,
 // a refused reuse, a pattern base with overlays, a stored pattern reused through its lattice, a
-// partial base with an overlay, a plan that loses fidelity and falls back to the whole bitmap,
-// pixels already stored, and matching switched off. Every image is seeded.
+// partial base with an overlay (planned serially, and from overlays prepared ahead), a plan
+// that loses fidelity and falls back to the whole bitmap, pixels already stored, and matching
+// switched off. Every image is seeded.
 #include "tessera/reuse/commit_plan.h"
 
 #include <map>
@@ -53,15 +54,20 @@ class CommitPlanTest : public ::testing::Test {
     catalog_.add(texture);
   }
 
-  CommitPlan plan(const cv::Mat& rgb, const std::optional<pattern::Pattern>& found = {}) {
+  match::TextureDescription describe(const cv::Mat& rgb) const {
+    return match::describeTexture(rgb, cv::Mat(rgb.size(), CV_8UC1, cv::Scalar(255)), rules_.match);
+  }
+
+  CommitPlan plan(const cv::Mat& rgb, const std::optional<pattern::Pattern>& found = {},
+                  const PreparedLayers* prepared = nullptr) {
     const texture::PatchBitmap bitmap = bitmapOf(rgb, 42);
-    const match::TextureDescription description =
-        match::describeTexture(rgb, cv::Mat(rgb.size(), CV_8UC1, cv::Scalar(255)), rules_.match);
+    const match::TextureDescription description = describe(rgb);
     const auto stored_pixels = [this](const std::string& key) -> std::optional<std::int64_t> {
       const auto it = stored_keys_.find(key);
       return it == stored_keys_.end() ? std::nullopt : std::optional<std::int64_t>(it->second);
     };
-    CommitPlan plan = planCommit(bitmap, description, found, catalog_, stored_pixels, rules_);
+    CommitPlan plan =
+        planCommit(bitmap, description, found, catalog_, stored_pixels, rules_, nullptr, prepared);
     // Whatever the branch: layer 0 first, layers numbered in order, one patch, one run.
     for (std::size_t i = 0; i < plan.commit.instances.size(); ++i) {
       const db::TextureInstance& instance = plan.commit.instances[i];
@@ -222,6 +228,46 @@ TEST_F(CommitPlanTest, AStoredTextureWithAPosterOnItIsThePartialBaseOfTheBitmap)
                      crop.rgb.rows);
   EXPECT_GT((box & poster).area(), 0.9 * poster.area());
   EXPECT_LT(box.area(), 2.0 * poster.area());
+}
+
+TEST_F(CommitPlanTest, OverlaysPreparedAheadGiveTheSamePlanAndAreTakenAsPrepared) {
+  const cv::Mat plaster = shapes(400, 300, 5);
+  storeSingle(3, plaster);
+  cv::Mat wall = seenThrough(plaster, {1.0, 0.0, 120.0, 70.0}, 200, 150);
+  cv::Mat poster = wall(cv::Rect(70, 40, 50, 60));
+  cv::randu(poster, cv::Scalar::all(0), cv::Scalar::all(255));
+  cv::GaussianBlur(poster, poster, {9, 9}, 3.0);
+  // As the describing threads do it: the cascade ahead, then the overlays its verdicts imply.
+  const match::TextureDescription description = describe(wall);
+  const match::MatchCascade cascade(rules_.match);
+  const match::PrecheckedVerdicts prechecked = cascade.precheck(description, catalog_);
+  std::vector<match::CandidateVerdict> verdicts;
+  for (const auto& entry : prechecked.verdicts) verdicts.push_back(entry.second);
+  PreparedLayers prepared =
+      LayerPlanner(cascade, catalog_, rules_.patterns).prepare(description, {}, verdicts);
+  ASSERT_EQ(prepared.overlays.size(), 1u);
+
+  const CommitPlan serial = plan(wall);
+  const CommitPlan ahead = plan(wall, {}, &prepared);
+  EXPECT_EQ(ahead.method, serial.method);
+  ASSERT_EQ(ahead.commit.instances.size(), 2u);
+  ASSERT_EQ(ahead.commit.instances.size(), serial.commit.instances.size());
+  for (std::size_t i = 0; i < ahead.commit.instances.size(); ++i) {
+    const db::TextureInstance &a = ahead.commit.instances[i], &b = serial.commit.instances[i];
+    EXPECT_EQ(a.texture_id, b.texture_id);
+    EXPECT_EQ(a.psnr_db, b.psnr_db);
+    EXPECT_EQ(a.transform.tx, b.transform.tx);
+    EXPECT_EQ(a.transform.ty, b.transform.ty);
+  }
+  ASSERT_EQ(ahead.commit.textures.size(), 1u);
+  EXPECT_EQ(ahead.commit.textures[0].content_key, serial.commit.textures[0].content_key);
+
+  // The crop stored is the one prepared, not worked out again.
+  PreparedOverlay& crop = prepared.overlays[0];
+  crop.opaque_rgb = cv::Mat(crop.opaque_rgb.size(), CV_8UC3, cv::Scalar(1, 2, 3));
+  const CommitPlan marked = plan(wall, {}, &prepared);
+  ASSERT_EQ(marked.commit.textures.size(), 1u);
+  EXPECT_EQ(marked.commit.textures[0].rgb.at<cv::Vec3b>(0, 0), cv::Vec3b(1, 2, 3));
 }
 
 TEST_F(CommitPlanTest, LayersShortOfTheRuleFallBackToTheWholeBitmap) {

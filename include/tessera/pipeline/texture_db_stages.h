@@ -57,6 +57,8 @@ struct DescribedPatch {
   std::optional<pattern::Pattern> pattern;  // in bitmap texels; looked for when enabled
   // The cascade's verdicts against the database as it was once described (match enabled).
   std::optional<match::PrecheckedVerdicts> prechecked;
+  // The overlays the layer plans would try, described and prechecked likewise.
+  std::optional<reuse::PreparedLayers> layers;
   double describe_ms = 0.0;                 // CCV and features of the new bitmap
   double pattern_ms = 0.0;                  // the autocorrelation analysis
   double cpu_ms = 0.0;                      // all of it, on the describing thread

@@ -20,6 +20,7 @@
 #include "tessera/db/texture_store.h"
 #include "tessera/match/match_cascade.h"
 #include "tessera/pattern/pattern_config.h"
+#include "tessera/reuse/layer_plan.h"
 #include "tessera/texture/bitmap_builder.h"
 
 namespace tessera::reuse {
@@ -52,13 +53,15 @@ struct CommitPlan {
 
 // Plans the commit of `bitmap`, described by `description` (with `found`, the periodic
 // pattern in it when one was found), against `catalog`; `prechecked` (MatchCascade::precheck)
-// saves verifying again what it verified, with the same plan. Never throws for a failed match
-// or layer plan (logged; the bitmap is then stored whole).
+// and `prepared` (LayerPlanner::prepare) save working out again what they worked out, with
+// the same plan. Never throws for a failed match or layer plan (logged; the bitmap is then
+// stored whole).
 CommitPlan planCommit(const texture::PatchBitmap& bitmap,
                       const match::TextureDescription& description,
                       const std::optional<pattern::Pattern>& found,
                       const match::TextureCatalog& catalog, const StoredPixels& stored_pixels,
                       const CommitRules& rules,
-                      const match::PrecheckedVerdicts* prechecked = nullptr);
+                      const match::PrecheckedVerdicts* prechecked = nullptr,
+                      const PreparedLayers* prepared = nullptr);
 
 }  // namespace tessera::reuse

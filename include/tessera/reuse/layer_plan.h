@@ -27,6 +27,21 @@ struct OverlayMatch {
   match::MatchDecision decision;  // the crop's texel -> a stored texture, if any
 };
 
+// An overlay crop worked out ahead of the serial commit, on the describing threads: what
+// depends on the bitmap and the box only (the description and the inpainted crop), and the
+// cascade's verdicts against the catalog as it was then.
+struct PreparedOverlay {
+  cv::Rect box;
+  match::TextureDescription description;
+  cv::Mat opaque_rgb;
+  match::PrecheckedVerdicts prechecked;
+};
+
+struct PreparedLayers {
+  std::vector<PreparedOverlay> overlays;
+  double ms = 0.0;
+};
+
 struct LayerPlan {
   std::optional<pattern::Pattern> found;  // a new pattern, in bitmap texels
   // The bitmap without its overlay regions (when there are some; its CCV, no features), and
@@ -38,12 +53,21 @@ struct LayerPlan {
   match::Fidelity fidelity;  // of all layers together, over the whole bitmap
 };
 
-// Plans a bitmap's layers against a catalog as it is.
+// Plans a bitmap's layers against a catalog as it is. Overlays `prepared` holds for the same
+// box take its description and verdicts: the plan is the same as without them.
 class LayerPlanner {
  public:
   LayerPlanner(const match::MatchCascade& cascade, const match::TextureCatalog& catalog,
-               const pattern::PatternStageConfig& patterns)
-      : cascade_(cascade), catalog_(catalog), patterns_(patterns) {}
+               const pattern::PatternStageConfig& patterns,
+               const PreparedLayers* prepared = nullptr)
+      : cascade_(cascade), catalog_(catalog), patterns_(patterns), prepared_(prepared) {}
+
+  // Ahead of the commit: the overlays the plan would most likely try, described and
+  // prechecked: the pattern's when one was found, else, when none of the cascade's verdicts
+  // against the catalog now was accepted, those of a partial reuse.
+  PreparedLayers prepare(const match::TextureDescription& bitmap,
+                         const std::optional<pattern::Pattern>& found,
+                         const std::vector<match::CandidateVerdict>& verdicts) const;
 
   // A periodic pattern found in the bitmap: its base (a stored pattern the explained part
   // reuses, else the new tile) and its overlays.
@@ -57,6 +81,17 @@ class LayerPlanner {
       const std::vector<match::CandidateVerdict>& verdicts) const;
 
  private:
+  // What the placed candidate among `verdicts` leaves unexplained, as overlay boxes; nothing
+  // when no candidate is placed well enough for a partial reuse.
+  struct PartialReuse {
+    const match::CandidateVerdict* placed = nullptr;
+    std::vector<cv::Rect> boxes;
+  };
+  std::optional<PartialReuse> partialReuse(
+      const match::TextureDescription& bitmap,
+      const std::vector<match::CandidateVerdict>& verdicts) const;
+  PreparedOverlay describeOverlay(const match::TextureDescription& bitmap,
+                                  const cv::Rect& box) const;
   std::vector<OverlayMatch> matchOverlays(const match::TextureDescription& bitmap,
                                           const std::vector<cv::Rect>& boxes) const;
   std::optional<LayerPlan> judged(const match::TextureDescription& bitmap, LayerPlan plan) const;
@@ -64,6 +99,7 @@ class LayerPlanner {
   const match::MatchCascade& cascade_;
   const match::TextureCatalog& catalog_;
   pattern::PatternStageConfig patterns_;
+  const PreparedLayers* prepared_;
 };
 
 // A stored pattern the cascade's prefilter let through, with its CCV distance.
