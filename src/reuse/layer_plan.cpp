@@ -45,27 +45,42 @@ std::vector<cv::Rect> overlayBoxes(const std::vector<cv::Rect>& blobs, const cv:
 
 }  // namespace
 
+match::CandidateVerdict tryStoredPattern(const pattern::Pattern& found,
+                                         const match::TextureDescription& shown,
+                                         const PatternCandidate& candidate,
+                                         const match::MatchConfig& config) {
+  const match::StoredTexture& stored = *candidate.texture;
+  match::CandidateVerdict verdict;
+  verdict.id = stored.id;
+  verdict.ccv_distance = candidate.ccv_distance;
+  verdict.method = "lattice";
+  verdict.transform = match::alignPattern(found.tile_rgb, found.tile_mask, found.lattice, stored);
+  if (!verdict.transform) return verdict;
+  verdict.transform = match::refineAlignment(shown.rgb, shown.mask, stored, *verdict.transform);
+  const match::Fidelity fidelity = match::measureFidelity(
+      shown.rgb, shown.mask,
+      match::renderStored(stored, *verdict.transform, shown.rgb.cols, shown.rgb.rows));
+  verdict.psnr_db = fidelity.psnr_db;
+  verdict.coverage = fidelity.coverage;
+  verdict.accepted = config.accepts(fidelity);
+  return verdict;
+}
+
 std::optional<match::CandidateVerdict> reuseStoredPattern(
     const pattern::Pattern& found, const match::TextureDescription& shown,
-    const std::vector<PatternCandidate>& candidates, const match::MatchConfig& config) {
+    const std::vector<PatternCandidate>& candidates, const match::MatchConfig& config,
+    const match::PrecheckedVerdicts* prechecked) {
   for (const PatternCandidate& candidate : candidates) {
-    const match::StoredTexture& stored = *candidate.texture;
-    match::CandidateVerdict verdict;
-    verdict.id = stored.id;
-    verdict.ccv_distance = candidate.ccv_distance;
-    verdict.method = "lattice";
-    verdict.transform = match::alignPattern(found.tile_rgb, found.tile_mask, found.lattice, stored);
-    if (!verdict.transform) continue;
-    verdict.transform = match::refineAlignment(shown.rgb, shown.mask, stored, *verdict.transform);
-    const match::Fidelity fidelity = match::measureFidelity(
-        shown.rgb, shown.mask,
-        match::renderStored(stored, *verdict.transform, shown.rgb.cols, shown.rgb.rows));
-    verdict.psnr_db = fidelity.psnr_db;
-    verdict.coverage = fidelity.coverage;
-    if (config.accepts(fidelity)) {
-      verdict.accepted = true;
-      return verdict;
+    const match::CandidateVerdict* ready = nullptr;
+    if (prechecked != nullptr) {
+      for (const auto& [texture, verdict] : prechecked->verdicts) {
+        if (texture.lock() == candidate.texture) ready = &verdict;
+      }
     }
+    match::CandidateVerdict verdict =
+        ready != nullptr ? *ready : tryStoredPattern(found, shown, candidate, config);
+    verdict.ccv_distance = candidate.ccv_distance;
+    if (verdict.accepted) return verdict;
   }
   return std::nullopt;
 }
@@ -155,14 +170,23 @@ PreparedLayers LayerPlanner::prepare(const match::TextureDescription& bitmap,
   std::vector<cv::Rect> boxes;
   const bool matched = std::any_of(verdicts.begin(), verdicts.end(),
                                    [](const match::CandidateVerdict& v) { return v.accepted; });
+  PreparedLayers prepared;
   if (found) {
     boxes = overlayBoxes(found->overlays, bitmap.rgb.size(), patterns_);
+    // Every stored pattern the plan may try, until one is accepted, as it tries them.
+    const std::optional<match::TextureDescription> base = patternBase(bitmap, boxes);
+    const match::TextureDescription& rest = base ? *base : bitmap;
+    for (const PatternCandidate& candidate : patternCandidates(rest)) {
+      const match::CandidateVerdict verdict =
+          tryStoredPattern(*found, rest, candidate, cascade_.config());
+      prepared.stored_patterns.verdicts.emplace_back(candidate.texture, verdict);
+      if (verdict.accepted) break;
+    }
   } else if (!matched) {
     if (std::optional<PartialReuse> partial = partialReuse(bitmap, verdicts)) {
       boxes = std::move(partial->boxes);
     }
   }
-  PreparedLayers prepared;
   for (const cv::Rect& box : boxes) {
     const bool seen = std::any_of(prepared.overlays.begin(), prepared.overlays.end(),
                                   [&](const PreparedOverlay& o) { return o.box == box; });
@@ -176,25 +200,36 @@ PreparedLayers LayerPlanner::prepare(const match::TextureDescription& bitmap,
   return prepared;
 }
 
-std::optional<LayerPlan> LayerPlanner::planPattern(const match::TextureDescription& bitmap,
-                                                   pattern::Pattern found) const {
-  LayerPlan plan;
-  const std::vector<cv::Rect> boxes = overlayBoxes(found.overlays, bitmap.rgb.size(), patterns_);
-  if (!boxes.empty()) {
-    cv::Mat base_mask = bitmap.mask.clone();
-    for (const cv::Rect& box : boxes) base_mask(box).setTo(0);
-    plan.base = match::describeColours(bitmap.rgb, base_mask, cascade_.config());
-  }
+std::optional<match::TextureDescription> LayerPlanner::patternBase(
+    const match::TextureDescription& bitmap, const std::vector<cv::Rect>& boxes) const {
+  if (boxes.empty()) return std::nullopt;
+  cv::Mat base_mask = bitmap.mask.clone();
+  for (const cv::Rect& box : boxes) base_mask(box).setTo(0);
+  return match::describeColours(bitmap.rgb, base_mask, cascade_.config());
+}
+
+std::vector<PatternCandidate> LayerPlanner::patternCandidates(
+    const match::TextureDescription& rest) const {
   // The explained rest may be a pattern the database has (the other brick wall's).
   std::vector<PatternCandidate> candidates;
-  const match::TextureDescription& rest = plan.base ? *plan.base : bitmap;
   for (const match::CcvNeighbour& n : catalog_.nearest(
            rest.ccv.values, cascade_.config().ccv_max_distance, cascade_.config().max_candidates)) {
     if (auto stored = catalog_.load(n.id); stored && stored->pattern) {
       candidates.push_back({std::move(stored), n.distance});
     }
   }
-  plan.base_reuse = reuseStoredPattern(found, rest, candidates, cascade_.config());
+  return candidates;
+}
+
+std::optional<LayerPlan> LayerPlanner::planPattern(const match::TextureDescription& bitmap,
+                                                   pattern::Pattern found) const {
+  LayerPlan plan;
+  const std::vector<cv::Rect> boxes = overlayBoxes(found.overlays, bitmap.rgb.size(), patterns_);
+  plan.base = patternBase(bitmap, boxes);
+  const match::TextureDescription& rest = plan.base ? *plan.base : bitmap;
+  plan.base_reuse =
+      reuseStoredPattern(found, rest, patternCandidates(rest), cascade_.config(),
+                         prepared_ != nullptr ? &prepared_->stored_patterns : nullptr);
   plan.overlays = matchOverlays(bitmap, boxes);
   plan.found = std::move(found);
   return judged(bitmap, std::move(plan));

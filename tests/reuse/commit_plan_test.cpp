@@ -202,6 +202,35 @@ TEST_F(CommitPlanTest, AStoredPatternIsReusedThroughItsLatticeByAWallTurnedAgain
   EXPECT_TRUE(rules_.match.accepts(shown)) << shown.psnr_db << " dB";
 }
 
+TEST_F(CommitPlanTest, StoredPatternVerdictsPreparedAheadAreTakenAsPrepared) {
+  const cv::Mat tile = pattern::testing::randomTile(24, 18, 12);
+  const core::Lattice2 lattice{{24.0, 0.0}, {0.0, 18.0}};
+  catalog_.add(match::patternTexture(7, tile, cv::Mat(), lattice, rules_.match));
+  const core::Similarity2 turned = core::Similarity2::fromAngleScale(CV_PI / 2, 1.0, 5.0, 3.0);
+  const cv::Mat wall = pattern::testing::tiling(tile, lattice, 200, 150, turned);
+  const pattern::PatternAnalysis analysis =
+      pattern::analysePattern(wall, kAll, rules_.patterns.extractor);
+  ASSERT_TRUE(analysis.pattern) << analysis.reason;
+  const match::MatchCascade cascade(rules_.match);
+  PreparedLayers prepared = LayerPlanner(cascade, catalog_, rules_.patterns)
+                                .prepare(describe(wall), analysis.pattern, {});
+  ASSERT_EQ(prepared.stored_patterns.verdicts.size(), 1u);
+  EXPECT_TRUE(prepared.stored_patterns.verdicts[0].second.accepted);
+
+  // With the cascade's own match set aside, the stored tile comes through the lattices, with
+  // or without the prepared verdict; a prepared refusal is taken as it is.
+  rules_.match.ncc_min_score = 1.1;
+  const CommitPlan serial = plan(wall, analysis.pattern);
+  const CommitPlan ahead = plan(wall, analysis.pattern, &prepared);
+  EXPECT_EQ(serial.method, "lattice");
+  EXPECT_EQ(ahead.method, serial.method);
+  EXPECT_EQ(ahead.base().texture_id, 7);
+  EXPECT_EQ(ahead.base().transform.tx, serial.base().transform.tx);
+  EXPECT_EQ(ahead.base().transform.ty, serial.base().transform.ty);
+  prepared.stored_patterns.verdicts[0].second.accepted = false;
+  EXPECT_EQ(plan(wall, analysis.pattern, &prepared).method, "pattern");
+}
+
 TEST_F(CommitPlanTest, AStoredTextureWithAPosterOnItIsThePartialBaseOfTheBitmap) {
   const cv::Mat plaster = shapes(400, 300, 5);
   storeSingle(3, plaster);

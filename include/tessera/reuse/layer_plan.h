@@ -39,6 +39,8 @@ struct PreparedOverlay {
 
 struct PreparedLayers {
   std::vector<PreparedOverlay> overlays;
+  // A found pattern's verdicts against the stored patterns it may reuse.
+  match::PrecheckedVerdicts stored_patterns;
   double ms = 0.0;
 };
 
@@ -51,6 +53,12 @@ struct LayerPlan {
   std::optional<match::CandidateVerdict> base_reuse;
   std::vector<OverlayMatch> overlays;
   match::Fidelity fidelity;  // of all layers together, over the whole bitmap
+};
+
+// A stored pattern the cascade's prefilter let through, with its CCV distance.
+struct PatternCandidate {
+  std::shared_ptr<const match::StoredTexture> texture;
+  double ccv_distance = 0.0;
 };
 
 // Plans a bitmap's layers against a catalog as it is. Overlays `prepared` holds for the same
@@ -87,6 +95,10 @@ class LayerPlanner {
     const match::CandidateVerdict* placed = nullptr;
     std::vector<cv::Rect> boxes;
   };
+  // A found pattern's base: the bitmap without its overlays' boxes (nothing when none).
+  std::optional<match::TextureDescription> patternBase(const match::TextureDescription& bitmap,
+                                                       const std::vector<cv::Rect>& boxes) const;
+  std::vector<PatternCandidate> patternCandidates(const match::TextureDescription& rest) const;
   std::optional<PartialReuse> partialReuse(
       const match::TextureDescription& bitmap,
       const std::vector<match::CandidateVerdict>& verdicts) const;
@@ -102,19 +114,20 @@ class LayerPlanner {
   const PreparedLayers* prepared_;
 };
 
-// A stored pattern the cascade's prefilter let through, with its CCV distance.
-struct PatternCandidate {
-  std::shared_ptr<const match::StoredTexture> texture;
-  double ccv_distance = 0.0;
-};
+// `candidate` aligned to `found` through the two lattices (match/pattern_alignment.h), and
+// how faithfully it then shows `shown` (a bitmap, or the part its overlays leave): two walls
+// of the same bricks share one tile even when their texel grids are turned against each other.
+match::CandidateVerdict tryStoredPattern(const pattern::Pattern& found,
+                                         const match::TextureDescription& shown,
+                                         const PatternCandidate& candidate,
+                                         const match::MatchConfig& config);
 
-// The first candidate that shows `shown` (a bitmap, or the part its overlays leave) as
-// faithfully as a reuse must, aligned to `found` through the two lattices (match/
-// pattern_alignment.h): two walls of the same bricks share one tile even when their texel
-// grids are turned against each other.
+// The first of `candidates` that shows `shown` as faithfully as a reuse must. A candidate
+// `prechecked` holds a verdict for (the very same stored texture) takes it as it is.
 std::optional<match::CandidateVerdict> reuseStoredPattern(
     const pattern::Pattern& found, const match::TextureDescription& shown,
-    const std::vector<PatternCandidate>& candidates, const match::MatchConfig& config);
+    const std::vector<PatternCandidate>& candidates, const match::MatchConfig& config,
+    const match::PrecheckedVerdicts* prechecked = nullptr);
 
 // Patch texel -> texel of the crop `box` (an overlay's own texture).
 core::Similarity2 patchToBox(const cv::Rect& box);
