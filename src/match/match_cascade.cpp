@@ -328,20 +328,12 @@ PrecheckedVerdicts MatchCascade::precheck(const TextureDescription& query,
   return seen;
 }
 
-namespace {
-
-// The verdict `prechecked` holds for exactly `stored` (the same object: an id alone could name
-// a texture stored after another was removed).
-const CandidateVerdict* verdictFor(const PrecheckedVerdicts* prechecked,
-                                   const StoredTexture& stored) {
-  if (prechecked == nullptr) return nullptr;
-  for (const auto& [texture, verdict] : prechecked->verdicts) {
+const CandidateVerdict* PrecheckedVerdicts::find(const StoredTexture& stored) const {
+  for (const auto& [texture, verdict] : verdicts) {
     if (texture.lock().get() == &stored) return &verdict;
   }
   return nullptr;
 }
-
-}  // namespace
 
 MatchDecision MatchCascade::run(const TextureDescription& query, const TextureCatalog& catalog,
                                 const PrecheckedVerdicts* prechecked,
@@ -355,7 +347,7 @@ MatchDecision MatchCascade::run(const TextureDescription& query, const TextureCa
   for (const CcvNeighbour& candidate : candidates) {
     const std::shared_ptr<const StoredTexture> stored = catalog.load(candidate.id);
     if (!stored) continue;
-    const CandidateVerdict* known = verdictFor(prechecked, *stored);
+    const CandidateVerdict* known = prechecked != nullptr ? prechecked->find(*stored) : nullptr;
     CandidateVerdict verdict =
         known != nullptr ? *known : tryCandidate(query, *stored, candidate.distance);
     verdict.ccv_distance = candidate.distance;

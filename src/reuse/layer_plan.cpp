@@ -71,12 +71,8 @@ std::optional<match::CandidateVerdict> reuseStoredPattern(
     const std::vector<PatternCandidate>& candidates, const match::MatchConfig& config,
     const match::PrecheckedVerdicts* prechecked) {
   for (const PatternCandidate& candidate : candidates) {
-    const match::CandidateVerdict* ready = nullptr;
-    if (prechecked != nullptr) {
-      for (const auto& [texture, verdict] : prechecked->verdicts) {
-        if (texture.lock() == candidate.texture) ready = &verdict;
-      }
-    }
+    const match::CandidateVerdict* ready =
+        prechecked != nullptr ? prechecked->find(*candidate.texture) : nullptr;
     match::CandidateVerdict verdict =
         ready != nullptr ? *ready : tryStoredPattern(found, shown, candidate, config);
     verdict.ccv_distance = candidate.ccv_distance;
@@ -166,11 +162,13 @@ PreparedLayers LayerPlanner::prepare(const match::TextureDescription& bitmap,
                                      const std::optional<pattern::Pattern>& found,
                                      const std::vector<match::CandidateVerdict>& verdicts) const {
   const auto start = std::chrono::steady_clock::now();
-  // The commit's likely path only: a pattern's plan rarely fails, and a match needs no layers.
-  std::vector<cv::Rect> boxes;
-  const bool matched = std::any_of(verdicts.begin(), verdicts.end(),
-                                   [](const match::CandidateVerdict& v) { return v.accepted; });
+  // The commit's likely path only: a match needs no layers, and a pattern's plan rarely fails.
   PreparedLayers prepared;
+  if (std::any_of(verdicts.begin(), verdicts.end(),
+                  [](const match::CandidateVerdict& v) { return v.accepted; })) {
+    return prepared;
+  }
+  std::vector<cv::Rect> boxes;
   if (found) {
     boxes = overlayBoxes(found->overlays, bitmap.rgb.size(), patterns_);
     // Every stored pattern the plan may try, until one is accepted, as it tries them.
@@ -182,15 +180,10 @@ PreparedLayers LayerPlanner::prepare(const match::TextureDescription& bitmap,
       prepared.stored_patterns.verdicts.emplace_back(candidate.texture, verdict);
       if (verdict.accepted) break;
     }
-  } else if (!matched) {
-    if (std::optional<PartialReuse> partial = partialReuse(bitmap, verdicts)) {
-      boxes = std::move(partial->boxes);
-    }
+  } else if (std::optional<PartialReuse> partial = partialReuse(bitmap, verdicts)) {
+    boxes = std::move(partial->boxes);
   }
-  for (const cv::Rect& box : boxes) {
-    const bool seen = std::any_of(prepared.overlays.begin(), prepared.overlays.end(),
-                                  [&](const PreparedOverlay& o) { return o.box == box; });
-    if (seen) continue;
+  for (const cv::Rect& box : boxes) {  // overlayBoxes merged any that overlap
     PreparedOverlay overlay = describeOverlay(bitmap, box);
     overlay.prechecked = cascade_.precheck(overlay.description, catalog_);
     prepared.overlays.push_back(std::move(overlay));

@@ -86,6 +86,21 @@ class CommitPlanTest : public ::testing::Test {
     return plan;
   }
 
+  struct TurnedWall {
+    cv::Mat tile;
+    core::Lattice2 lattice;
+    cv::Mat wall;
+  };
+  // A pattern stored as texture 7, and the same pattern on another wall, its texel grid a
+  // quarter turn and a shift away.
+  TurnedWall storePatternAndTurnItsWall() {
+    TurnedWall turned{pattern::testing::randomTile(24, 18, 12), {{24.0, 0.0}, {0.0, 18.0}}, {}};
+    catalog_.add(match::patternTexture(7, turned.tile, cv::Mat(), turned.lattice, rules_.match));
+    const core::Similarity2 quarter = core::Similarity2::fromAngleScale(CV_PI / 2, 1.0, 5.0, 3.0);
+    turned.wall = pattern::testing::tiling(turned.tile, turned.lattice, 200, 150, quarter);
+    return turned;
+  }
+
   CommitRules rules_{{}, {}, 5};
   match::MemoryCatalog catalog_{rules_.match.ccv};
   std::map<std::string, std::int64_t> stored_keys_;
@@ -179,12 +194,9 @@ TEST_F(CommitPlanTest, APatternWithAPosterIsOneTileAndTheCropAsAnOverlay) {
 }
 
 TEST_F(CommitPlanTest, AStoredPatternIsReusedThroughItsLatticeByAWallTurnedAgainstIt) {
-  const cv::Mat tile = pattern::testing::randomTile(24, 18, 12);
-  const core::Lattice2 lattice{{24.0, 0.0}, {0.0, 18.0}};
-  catalog_.add(match::patternTexture(7, tile, cv::Mat(), lattice, rules_.match));
-  // The same pattern on another wall, its texel grid a quarter turn and a shift away.
-  const core::Similarity2 turned = core::Similarity2::fromAngleScale(CV_PI / 2, 1.0, 5.0, 3.0);
-  const cv::Mat wall = pattern::testing::tiling(tile, lattice, 200, 150, turned);
+  const TurnedWall turned = storePatternAndTurnItsWall();
+  const cv::Mat &tile = turned.tile, &wall = turned.wall;
+  const core::Lattice2& lattice = turned.lattice;
   const pattern::PatternAnalysis analysis =
       pattern::analysePattern(wall, kAll, rules_.patterns.extractor);
   ASSERT_TRUE(analysis.pattern) << analysis.reason;
@@ -203,11 +215,7 @@ TEST_F(CommitPlanTest, AStoredPatternIsReusedThroughItsLatticeByAWallTurnedAgain
 }
 
 TEST_F(CommitPlanTest, StoredPatternVerdictsPreparedAheadAreTakenAsPrepared) {
-  const cv::Mat tile = pattern::testing::randomTile(24, 18, 12);
-  const core::Lattice2 lattice{{24.0, 0.0}, {0.0, 18.0}};
-  catalog_.add(match::patternTexture(7, tile, cv::Mat(), lattice, rules_.match));
-  const core::Similarity2 turned = core::Similarity2::fromAngleScale(CV_PI / 2, 1.0, 5.0, 3.0);
-  const cv::Mat wall = pattern::testing::tiling(tile, lattice, 200, 150, turned);
+  const cv::Mat wall = storePatternAndTurnItsWall().wall;
   const pattern::PatternAnalysis analysis =
       pattern::analysePattern(wall, kAll, rules_.patterns.extractor);
   ASSERT_TRUE(analysis.pattern) << analysis.reason;

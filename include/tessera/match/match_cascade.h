@@ -147,6 +147,10 @@ struct MatchDecision {
 struct PrecheckedVerdicts {
   std::vector<std::pair<std::weak_ptr<const StoredTexture>, CandidateVerdict>> verdicts;
   double ms = 0.0;
+
+  // The verdict reached against exactly `stored` (the same object: an id alone could name a
+  // texture stored after another was removed), or null.
+  const CandidateVerdict* find(const StoredTexture& stored) const;
 };
 
 class MatchCascade {

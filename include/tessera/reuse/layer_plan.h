@@ -70,9 +70,10 @@ class LayerPlanner {
                const PreparedLayers* prepared = nullptr)
       : cascade_(cascade), catalog_(catalog), patterns_(patterns), prepared_(prepared) {}
 
-  // Ahead of the commit: the overlays the plan would most likely try, described and
-  // prechecked: the pattern's when one was found, else, when none of the cascade's verdicts
-  // against the catalog now was accepted, those of a partial reuse.
+  // Ahead of the commit, when none of the cascade's verdicts against the catalog now was
+  // accepted: the overlays the plan would most likely try (the pattern's when one was found,
+  // else a partial reuse's), described and prechecked, and the pattern's verdicts against the
+  // stored patterns.
   PreparedLayers prepare(const match::TextureDescription& bitmap,
                          const std::optional<pattern::Pattern>& found,
                          const std::vector<match::CandidateVerdict>& verdicts) const;
