@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <utility>
 
 #include <fmt/format.h>
 #include <opencv2/core.hpp>
@@ -45,48 +46,143 @@ cv::Mat greyForCorrelation(const cv::Mat& rgb, const cv::Mat& mask) {
   return grey;
 }
 
-cv::Mat normalisedCrossCorrelation(const cv::Mat& image, const cv::Mat& tile) {
-  requireGrey(image, "normalisedCrossCorrelation", "image");
-  requireGrey(tile, "normalisedCrossCorrelation", "tile");
-  if (tile.cols > image.cols || tile.rows > image.rows) {
-    throw core::Error(fmt::format("normalisedCrossCorrelation: tile {}x{} larger than image {}x{}",
-                                  tile.cols, tile.rows, image.cols, image.rows));
-  }
-  const cv::Size size(image.cols - tile.cols + 1, image.rows - tile.rows + 1);
-  cv::Scalar tile_mean, tile_std;
-  cv::meanStdDev(tile, tile_mean, tile_std);
-  // matchTemplate answers 1 everywhere for a flat tile; it matches nothing.
-  if (tile_std[0] < kFlatStdDev) return cv::Mat::zeros(size, CV_32FC1);
+namespace {
 
-  cv::Mat ncc;
-  cv::matchTemplate(image, tile, ncc, cv::TM_CCOEFF_NORMED);
-  // Each window's spread from integral images in double, to zero flat windows ourselves.
-  cv::Mat sum, square_sum;
-  cv::integral(image, sum, square_sum, CV_64F, CV_64F);
-  const double area = static_cast<double>(tile.total());
-  const double min_variance = kFlatStdDev * kFlatStdDev;
-  for (int y = 0; y < size.height; ++y) {
-    auto* out = ncc.ptr<float>(y);
-    const auto* s0 = sum.ptr<double>(y);
-    const auto* s1 = sum.ptr<double>(y + tile.rows);
-    const auto* q0 = square_sum.ptr<double>(y);
-    const auto* q1 = square_sum.ptr<double>(y + tile.rows);
-    for (int x = 0; x < size.width; ++x) {
-      const int x1 = x + tile.cols;
-      const double mean = (s1[x1] - s1[x] - s0[x1] + s0[x]) / area;
-      const double variance = (q1[x1] - q1[x] - q0[x1] + q0[x]) / area - mean * mean;
-      if (variance < min_variance || !std::isfinite(out[x])) out[x] = 0.0F;
-    }
+// An image made ready to be correlated with tiles: its spectrum at a size the DFT likes, no
+// smaller than the image, so that no placement inside it wraps round; and its integral images,
+// which give each window's spread. The correlation of a tile T (h x w, zero mean) at offset d is
+// corr(d) = sum_p I(d + p) T(p); with R = T turned half round, R(p) = T(size - 1 - p), it is
+// sum_q I(d + size - 1 - q) T(q) = (I * T)(d + size - 1), the convolution read further on. So
+// one DFT of a tile gives its NCC at two turns.
+class TileCorrelator {
+ public:
+  explicit TileCorrelator(const cv::Mat& image)
+      : image_size_(image.size()),
+        padded_(cv::getOptimalDFTSize(image.cols), cv::getOptimalDFTSize(image.rows)) {
+    // Less its mean, which changes no correlation with a zero-mean tile and keeps the float
+    // DFT's rounding small beside the structure.
+    cv::Mat canvas = cv::Mat::zeros(padded_, CV_32FC1);
+    cv::subtract(image, cv::mean(image), canvas(cv::Rect(cv::Point(), image_size_)));
+    cv::dft(canvas, spectrum_, 0, image.rows);
+    cv::integral(image, sum_, square_sum_, CV_64F, CV_64F);
   }
-  return ncc;
+
+  // The NCC maps of `tile` and, if `half_turn_too`, of the tile turned half round ({} if not).
+  std::pair<cv::Mat, cv::Mat> ncc(const cv::Mat& tile, bool half_turn_too) const {
+    const cv::Size valid(image_size_.width - tile.cols + 1, image_size_.height - tile.rows + 1);
+    cv::Scalar tile_mean, tile_std;
+    cv::meanStdDev(tile, tile_mean, tile_std);
+    // A flat tile matches nothing.
+    if (tile_std[0] < kFlatStdDev) {
+      return {cv::Mat::zeros(valid, CV_32FC1),
+              half_turn_too ? cv::Mat::zeros(valid, CV_32FC1) : cv::Mat()};
+    }
+    cv::Mat canvas = cv::Mat::zeros(padded_, CV_32FC1);
+    cv::subtract(tile, tile_mean, canvas(cv::Rect(cv::Point(), tile.size())));
+    cv::Mat tile_spectrum;
+    cv::dft(canvas, tile_spectrum, 0, tile.rows);
+    // Sum of the zero-mean tile's squares: its variance times its texels.
+    const double tile_energy = tile_std[0] * tile_std[0] * static_cast<double>(tile.total());
+    const cv::Rect at_origin(cv::Point(), valid);
+    cv::Mat first = normalise(transform(tile_spectrum, /*conjugate=*/true)(at_origin), tile.size(),
+                              tile_energy);
+    if (!half_turn_too) return {first, {}};
+    const cv::Rect further_on(cv::Point(tile.cols - 1, tile.rows - 1), valid);
+    return {first,
+            normalise(transform(tile_spectrum, false)(further_on), tile.size(), tile_energy)};
+  }
+
+ private:
+  // The image's correlation with the tile (conjugate) or convolution with it, whole.
+  cv::Mat transform(const cv::Mat& tile_spectrum, bool conjugate) const {
+    cv::Mat product, out;
+    cv::mulSpectrums(spectrum_, tile_spectrum, product, 0, conjugate);
+    cv::idft(product, out, cv::DFT_SCALE | cv::DFT_REAL_OUTPUT);
+    return out;
+  }
+
+  // Correlation over each window's spread times the tile's: the window's sum of squared
+  // deviations from the integral images, in double. Flat windows score 0.
+  cv::Mat normalise(const cv::Mat& correlation, const cv::Size& tile_size,
+                    double tile_energy) const {
+    cv::Mat ncc(correlation.size(), CV_32FC1);
+    const double area = static_cast<double>(tile_size.area());
+    const double min_variance = kFlatStdDev * kFlatStdDev;
+    for (int y = 0; y < ncc.rows; ++y) {
+      auto* out = ncc.ptr<float>(y);
+      const auto* in = correlation.ptr<float>(y);
+      const auto* s0 = sum_.ptr<double>(y);
+      const auto* s1 = sum_.ptr<double>(y + tile_size.height);
+      const auto* q0 = square_sum_.ptr<double>(y);
+      const auto* q1 = square_sum_.ptr<double>(y + tile_size.height);
+      for (int x = 0; x < ncc.cols; ++x) {
+        const int x1 = x + tile_size.width;
+        const double sum = s1[x1] - s1[x] - s0[x1] + s0[x];
+        const double variance =
+            (q1[x1] - q1[x] - q0[x1] + q0[x]) / area - (sum / area) * (sum / area);
+        const double score = in[x] / std::sqrt(variance * area * tile_energy);
+        out[x] = variance < min_variance || !std::isfinite(score)
+                     ? 0.0F
+                     : static_cast<float>(std::clamp(score, -1.0, 1.0));
+      }
+    }
+    return ncc;
+  }
+
+  cv::Size image_size_, padded_;
+  cv::Mat spectrum_, sum_, square_sum_;
+};
+
+bool fitsInside(const cv::Mat& tile, const cv::Mat& image) {
+  return tile.cols <= image.cols && tile.rows <= image.rows;
 }
 
-CorrelationPeak findTile(const cv::Mat& image, const cv::Mat& tile) {
-  const cv::Mat ncc = normalisedCrossCorrelation(image, tile);
+CorrelationPeak peakOf(const cv::Mat& ncc) {
   double best = 0.0;
   cv::Point at;
   cv::minMaxLoc(ncc, nullptr, &best, nullptr, &at);
   return {at.x, at.y, best};
+}
+
+}  // namespace
+
+cv::Mat normalisedCrossCorrelation(const cv::Mat& image, const cv::Mat& tile) {
+  requireGrey(image, "normalisedCrossCorrelation", "image");
+  requireGrey(tile, "normalisedCrossCorrelation", "tile");
+  if (!fitsInside(tile, image)) {
+    throw core::Error(fmt::format("normalisedCrossCorrelation: tile {}x{} larger than image {}x{}",
+                                  tile.cols, tile.rows, image.cols, image.rows));
+  }
+  return TileCorrelator(image).ncc(tile, false).first;
+}
+
+CorrelationPeak findTile(const cv::Mat& image, const cv::Mat& tile) {
+  return peakOf(normalisedCrossCorrelation(image, tile));
+}
+
+cv::Mat turned(const cv::Mat& image, int turns) {
+  if (turns % 4 == 0) return image;
+  cv::Mat out;
+  const int codes[] = {0, cv::ROTATE_90_CLOCKWISE, cv::ROTATE_180, cv::ROTATE_90_COUNTERCLOCKWISE};
+  cv::rotate(image, out, codes[turns % 4]);
+  return out;
+}
+
+TurnedPeak findTileAtAnyTurn(const cv::Mat& image, const cv::Mat& tile) {
+  requireGrey(image, "findTileAtAnyTurn", "image");
+  requireGrey(tile, "findTileAtAnyTurn", "tile");
+  const TileCorrelator correlator(image);
+  TurnedPeak best;
+  // Turns 0 and 2 from one DFT of the tile, 1 and 3 (= 1 then half round) from another.
+  for (int turns = 0; turns < 2; ++turns) {
+    const cv::Mat tile_turned = turned(tile, turns);
+    if (!fitsInside(tile_turned, image)) continue;
+    const auto maps = correlator.ncc(tile_turned, true);
+    const CorrelationPeak straight = peakOf(maps.first), half_round = peakOf(maps.second);
+    if (straight.score > best.peak.score) best = {straight, turns};
+    if (half_round.score > best.peak.score) best = {half_round, turns + 2};
+  }
+  return best;
 }
 
 namespace {

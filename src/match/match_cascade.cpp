@@ -31,23 +31,10 @@ core::Similarity2 unrotate(int turns, int width, int height) {
   }
 }
 
-cv::Mat rotated(const cv::Mat& image, int turns) {
-  if (turns % 4 == 0) return image;
-  cv::Mat out;
-  const int codes[] = {0, cv::ROTATE_90_CLOCKWISE, cv::ROTATE_180, cv::ROTATE_90_COUNTERCLOCKWISE};
-  cv::rotate(image, out, codes[turns % 4]);
-  return out;
-}
-
 // The best placement of a stored texture that overlaps the new bitmap in part, at any quarter
 // turn: found on both scaled to at most kCoarsePx a side (masked NCC over every shift, by DFT),
 // then refined at full size around it. Placements sharing fewer than kMinOverlapShare of the
 // smaller mask's texels are not considered (the acceptance rule's coverage decides the rest).
-struct TurnedPeak {
-  CorrelationPeak peak;
-  int turns = 0;
-};
-
 TurnedPeak findPartialOverlap(const cv::Mat& query_grey, const cv::Mat& query_mask,
                               const cv::Mat& stored_grey, const cv::Mat& stored_mask) {
   constexpr double kCoarsePx = 192.0;
@@ -71,16 +58,16 @@ TurnedPeak findPartialOverlap(const cv::Mat& query_grey, const cv::Mat& query_ma
   const cv::Mat qm = small(full_query_mask, cv::INTER_NEAREST);
   TurnedPeak best;
   for (int turns = 0; turns < 4; ++turns) {
-    const CorrelationPeak peak = findOverlap(
-        q, qm, small(rotated(stored_grey, turns), cv::INTER_AREA),
-        small(rotated(full_stored_mask, turns), cv::INTER_NEAREST), min_overlap * f * f);
+    const CorrelationPeak peak =
+        findOverlap(q, qm, small(turned(stored_grey, turns), cv::INTER_AREA),
+                    small(turned(full_stored_mask, turns), cv::INTER_NEAREST), min_overlap * f * f);
     if (peak.score > best.peak.score) best = {peak, turns};
   }
   if (best.peak.score <= -1.0 || f >= 1.0) return best;
   const CorrelationPeak start{static_cast<int>(std::lround(best.peak.x / f)),
                               static_cast<int>(std::lround(best.peak.y / f)), best.peak.score};
-  best.peak = refineOverlap(query_grey, full_query_mask, rotated(stored_grey, best.turns),
-                            rotated(full_stored_mask, best.turns), start,
+  best.peak = refineOverlap(query_grey, full_query_mask, turned(stored_grey, best.turns),
+                            turned(full_stored_mask, best.turns), start,
                             static_cast<int>(std::ceil(1.0 / f)) + 1, min_overlap);
   return best;
 }
@@ -234,15 +221,14 @@ std::optional<core::Similarity2> MatchCascade::findPattern(const TextureDescript
   // smaller than the patch), else the new one inside the stored one.
   const cv::Mat query_grey = greyForCorrelation(query.rgb, query.mask);
   const cv::Mat stored_grey = greyForCorrelation(stored.description.rgb, stored.description.mask);
-  CorrelationPeak best;
-  int best_turns = 0;
+  const TurnedPeak inside = findTileAtAnyTurn(query_grey, stored_grey);
+  CorrelationPeak best = inside.peak;
+  int best_turns = inside.turns;
   bool stored_inside = true;
-  for (int turns = 0; turns < 4; ++turns) {
-    const cv::Mat tile = rotated(stored_grey, turns);
-    if (tile.cols <= query_grey.cols && tile.rows <= query_grey.rows) {
-      const CorrelationPeak peak = findTile(query_grey, tile);
-      if (peak.score > best.score) best = peak, best_turns = turns, stored_inside = true;
-    } else if (!stored.pattern && query_grey.cols <= tile.cols && query_grey.rows <= tile.rows) {
+  for (int turns = 0; turns < 4 && !stored.pattern; ++turns) {
+    const cv::Mat tile = turned(stored_grey, turns);
+    const bool fits_in_query = tile.cols <= query_grey.cols && tile.rows <= query_grey.rows;
+    if (!fits_in_query && query_grey.cols <= tile.cols && query_grey.rows <= tile.rows) {
       const CorrelationPeak peak = findTile(tile, query_grey);
       if (peak.score > best.score) best = peak, best_turns = turns, stored_inside = false;
     }

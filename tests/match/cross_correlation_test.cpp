@@ -90,6 +90,32 @@ TEST(CrossCorrelation, TheMapAgreesWithTheTextbookFormula) {
   }
 }
 
+TEST(CrossCorrelation, ATurnedTileIsFoundAtItsTurnWithTheScoresOfEachTurnAlone) {
+  std::mt19937 random(25);
+  const cv::Mat tile = randomTexture(40, 36, random);
+  for (int turns = 0; turns < 4; ++turns) {
+    cv::Mat image = randomTexture(200, 160, random);
+    const cv::Mat placed = turned(tile, turns);
+    placed.copyTo(image(cv::Rect(73, 51, placed.cols, placed.rows)));
+    addNoise(image, 5.0F, random);
+    const TurnedPeak found = findTileAtAnyTurn(image, tile);
+    EXPECT_EQ(found.turns, turns);
+    EXPECT_EQ(found.peak.x, 73);
+    EXPECT_EQ(found.peak.y, 51);
+    EXPECT_NEAR(found.peak.score, referenceNcc(image, placed, 73, 51), 1e-4);
+    // Turns 2 and 3 come from the convolution with turns 0 and 1: their score is the textbook
+    // one above, and no other turn scores as high.
+    for (int other = 0; other < 4; ++other) {
+      const CorrelationPeak alone = findTile(image, turned(tile, other));
+      if (other != turns) {
+        EXPECT_LT(alone.score, found.peak.score) << turns << " " << other;
+      }
+    }
+  }
+  // Too large at every turn: no placement.
+  EXPECT_EQ(findTileAtAnyTurn(randomTexture(30, 30, random), tile).peak.score, -1.0);
+}
+
 TEST(CrossCorrelation, FlatWindowsAndFlatTilesScoreZero) {
   std::mt19937 random(24);
   cv::Mat image(60, 80, CV_32FC1, cv::Scalar(100.0F));

@@ -1,8 +1,8 @@
 #pragma once
 // Zero-mean normalised cross-correlation of a tile at every offset inside an image, normalised
 // per window (the image's mean and spread under the tile at that offset, not over the whole
-// image), computed in the frequency domain: OpenCV's matchTemplate with TM_CCOEFF_NORMED,
-// which correlates by DFT and normalises each window from integral images.
+// image): correlated by DFT, each window normalised from integral images (as OpenCV's
+// matchTemplate with TM_CCOEFF_NORMED), and one DFT of a tile serving two of its quarter turns.
 #include <opencv2/core/mat.hpp>
 
 namespace tessera::match {
@@ -22,6 +22,19 @@ cv::Mat normalisedCrossCorrelation(const cv::Mat& image, const cv::Mat& tile);
 
 // The highest peak of that map. A flat window (no variance) scores 0.
 CorrelationPeak findTile(const cv::Mat& image, const cv::Mat& tile);
+
+// An image turned clockwise by `turns` quarter turns (cv::rotate); 0 turns: the image itself.
+cv::Mat turned(const cv::Mat& image, int turns);
+
+struct TurnedPeak {
+  CorrelationPeak peak;
+  int turns = 0;  // of the tile (or of the moving image), clockwise
+};
+
+// The best placement inside `image` of `tile` turned by 0 to 3 quarter turns (turned()), over
+// the turns at which it fits; a score of -1 when it fits at none. The image's DFT is taken
+// once, and each tile DFT serves two turns, half a turn apart.
+TurnedPeak findTileAtAnyTurn(const cv::Mat& image, const cv::Mat& tile);
 
 // Two textures that overlap in part, neither inside the other (the same floor seen from two
 // places): the shift (x, y) at which `moving`'s origin sits in `fixed`'s frame, so that
