@@ -218,41 +218,44 @@ std::optional<core::Similarity2> MatchCascade::findPattern(const TextureDescript
                                                            const StoredTexture& stored,
                                                            CandidateVerdict& verdict) const {
   // The stored image is looked for inside the new one (a pattern tile, or a single texture
-  // smaller than the patch), else the new one inside the stored one.
+  // smaller than the patch), else the new one inside the stored one, each at any quarter turn.
   const cv::Mat query_grey = greyForCorrelation(query.rgb, query.mask);
   const cv::Mat stored_grey = greyForCorrelation(stored.description.rgb, stored.description.mask);
+  // Stored turned inside the new one at `offset`: new texel p -> turned stored p - offset.
+  const auto storedInside = [&](const TurnedPeak& found) {
+    const core::Similarity2 shift{1.0, 0.0, -static_cast<double>(found.peak.x),
+                                  -static_cast<double>(found.peak.y)};
+    return shift.then(unrotate(found.turns, stored_grey.cols, stored_grey.rows));
+  };
   const TurnedPeak inside = findTileAtAnyTurn(query_grey, stored_grey);
-  CorrelationPeak best = inside.peak;
-  int best_turns = inside.turns;
-  bool stored_inside = true;
-  for (int turns = 0; turns < 4 && !stored.pattern; ++turns) {
-    const cv::Mat tile = turned(stored_grey, turns);
-    const bool fits_in_query = tile.cols <= query_grey.cols && tile.rows <= query_grey.rows;
-    if (!fits_in_query && query_grey.cols <= tile.cols && query_grey.rows <= tile.rows) {
-      const CorrelationPeak peak = findTile(tile, query_grey);
-      if (peak.score > best.score) best = peak, best_turns = turns, stored_inside = false;
+  double best = inside.peak.score;
+  core::Similarity2 new_to_stored = storedInside(inside);
+  if (!stored.pattern) {
+    // New turned inside the stored one: new texel p -> turned new texel -> + offset.
+    const TurnedPeak around = findTileAtAnyTurn(stored_grey, query_grey);
+    if (around.peak.score > best) {
+      best = around.peak.score;
+      const core::Similarity2 shift{1.0, 0.0, static_cast<double>(around.peak.x),
+                                    static_cast<double>(around.peak.y)};
+      new_to_stored =
+          unrotate(around.turns, query_grey.cols, query_grey.rows).inverse().then(shift);
     }
   }
   // Neither inside the other (the same floor seen from two places): the placement over the
   // texels both cover.
-  if (!stored.pattern && best.score < config_.ncc_min_score) {
+  if (!stored.pattern && best < config_.ncc_min_score) {
     const TurnedPeak overlap =
         findPartialOverlap(query_grey, query.mask, stored_grey, stored.description.mask);
-    if (overlap.peak.score > best.score) {
-      best = overlap.peak, best_turns = overlap.turns, stored_inside = true;
-    }
+    if (overlap.peak.score > best) best = overlap.peak.score, new_to_stored = storedInside(overlap);
   }
   verdict.method = "ncc";
-  if (best.score < config_.ncc_min_score) {
-    verdict.reason = fmt::format("NCC peak {:.2f} < {:.2f}", best.score, config_.ncc_min_score);
+  if (best < config_.ncc_min_score) {
+    verdict.reason = fmt::format("NCC peak {:.2f} < {:.2f}", best, config_.ncc_min_score);
     return std::nullopt;
   }
-  // New texel p -> rotated stored image: p - offset (stored inside) or p + offset.
-  const double sign = stored_inside ? -1.0 : 1.0;
-  const core::Similarity2 shift{1.0, 0.0, sign * best.x, sign * best.y};
   // Swatch pixel -> texture frame (a pattern's swatch starts at swatch_origin).
   const core::Similarity2 to_frame{1.0, 0.0, stored.swatch_origin.x(), stored.swatch_origin.y()};
-  return shift.then(unrotate(best_turns, stored_grey.cols, stored_grey.rows)).then(to_frame);
+  return new_to_stored.then(to_frame);
 }
 
 CandidateVerdict MatchCascade::tryCandidate(const TextureDescription& query,

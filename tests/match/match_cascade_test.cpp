@@ -127,6 +127,32 @@ TEST(MatchCascade, ATurnedAndShiftedRepetitionOfAPatternTileIsFoundByCrossCorrel
   EXPECT_NEAR(std::remainder(a.y() - b.y(), 32.0), 0.0, 0.5);
 }
 
+TEST(MatchCascade, ACropOfAStoredTextureAtAnyQuarterTurnIsPlacedInsideItByCrossCorrelation) {
+  // A plain, fine-grained surface (features unable to help) seen again in part: the new bitmap
+  // lies inside the stored one, turned by 0 to 3 quarter turns.
+  MatchConfig config;
+  config.features.min_inliers = 1'000'000;
+  const cv::Mat big = texture(400, 300, 29);
+  MemoryCatalog catalog(config.ccv);
+  catalog.add(stored(8, big, false, config));
+  const MatchCascade matcher(config);
+  // New texel (c, r) -> stored texel, for a 160 x 120 crop inside the stored 400 x 300.
+  for (const core::Similarity2& truth :
+       {core::Similarity2{1.0, 0.0, 57.0, 31.0}, core::Similarity2{0.0, 1.0, 330.0, 40.0},
+        core::Similarity2{-1.0, 0.0, 380.0, 250.0}, core::Similarity2{0.0, -1.0, 90.0, 270.0}}) {
+    SCOPED_TRACE(::testing::Message() << "a " << truth.a << " b " << truth.b);
+    const Rendered query = renderThrough(big, cv::Mat(), truth, 160, 120, false);
+    ASSERT_EQ(cv::countNonZero(query.covered), 160 * 120);
+    const CandidateVerdict verdict = matcher.tryCandidate(
+        describeTexture(query.rgb, query.covered, config), *catalog.load(8), 0.0);
+    ASSERT_TRUE(verdict.accepted) << verdict.reason;
+    EXPECT_EQ(verdict.method, "ncc");
+    for (const Eigen::Vector2d& p : {Eigen::Vector2d(0, 0), Eigen::Vector2d(159, 119)}) {
+      EXPECT_LT((verdict.transform->apply(p) - truth.apply(p)).norm(), 0.5) << p.transpose();
+    }
+  }
+}
+
 TEST(MatchCascade, ATextureOverlappingAStoredOneInPartIsPlacedOverTheirCommonTexels) {
   // The same floor from two places: the new bitmap shows the stored texture's bottom-right
   // corner and more, a quarter turn away, neither inside the other. With features unable to
