@@ -52,6 +52,25 @@ void checkTexture(const cv::Mat& texture, const cv::Mat& texture_mask, int width
   }
 }
 
+// The texels bilinear sampling at (map_x, map_y) reads, within a texture of `size`: from the
+// floor of the least coordinate to one past the floor of the largest. Texels beyond it weigh
+// nothing in any sample, so sampling the window alone gives the same values.
+cv::Rect sampledWindow(const cv::Mat& map_x, const cv::Mat& map_y, const cv::Size& size) {
+  double x_low = 0, x_high = 0, y_low = 0, y_high = 0;
+  cv::minMaxLoc(map_x, &x_low, &x_high);
+  cv::minMaxLoc(map_y, &y_low, &y_high);
+  // Clamped as doubles: a sample may lie anywhere.
+  const auto within = [](double x, int last) {
+    return static_cast<int>(std::clamp(x, -1.0, static_cast<double>(last) + 1.0));
+  };
+  const int x0 = std::max(0, within(std::floor(x_low), size.width - 1));
+  const int y0 = std::max(0, within(std::floor(y_low), size.height - 1));
+  const int x1 = std::min(size.width - 1, within(std::floor(x_high) + 1.0, size.width - 1));
+  const int y1 = std::min(size.height - 1, within(std::floor(y_high) + 1.0, size.height - 1));
+  if (x1 < x0 || y1 < y0) return {};
+  return {x0, y0, x1 - x0 + 1, y1 - y0 + 1};
+}
+
 // Samples `texture` at texture pixel coordinates (map_x, map_y), wrapped into [0, size) when
 // tiled; a texel is covered when the nearest texture texel exists and is valid.
 Rendered sampleTexture(const cv::Mat& texture, const cv::Mat& texture_mask, const cv::Mat& map_x,
@@ -79,15 +98,26 @@ Rendered sampleTexture(const cv::Mat& texture, const cv::Mat& texture_mask, cons
     cv::remap(texture, out.rgb, map_x, map_y, cv::INTER_LINEAR, border);
   } else {
     // Bilinear over the valid neighbours only (weights renormalised), so the colour of
-    // masked-out texels never bleeds into a covered texel at the mask's edge.
+    // masked-out texels never bleeds into a covered texel at the mask's edge. Untiled, only
+    // the window of texels the samples touch is converted (a small patch placed in a large
+    // stored texture needs a small part of it).
+    const cv::Rect window = tiled ? cv::Rect(0, 0, texture.cols, texture.rows)
+                                  : sampledWindow(map_x, map_y, texture.size());
+    if (window.empty()) return out;  // every sample falls outside the texture
+    cv::Mat window_x = map_x, window_y = map_y;
+    if (window.x != 0 || window.y != 0) {
+      cv::subtract(map_x, static_cast<double>(window.x), window_x);
+      cv::subtract(map_y, static_cast<double>(window.y), window_y);
+    }
     cv::Mat colour, weight, weight3, sampled_colour, sampled_weight;
-    texture.convertTo(colour, CV_32FC3);
-    cv::threshold(texture_mask, weight, 0, 1, cv::THRESH_BINARY);
+    texture(window).convertTo(colour, CV_32FC3);
+    cv::threshold(texture_mask(window), weight, 0, 1, cv::THRESH_BINARY);
     weight.convertTo(weight, CV_32F);
     cv::merge(std::vector<cv::Mat>{weight, weight, weight}, weight3);
     const int masked_border = tiled ? cv::BORDER_WRAP : cv::BORDER_CONSTANT;
-    cv::remap(colour.mul(weight3), sampled_colour, map_x, map_y, cv::INTER_LINEAR, masked_border);
-    cv::remap(weight3, sampled_weight, map_x, map_y, cv::INTER_LINEAR, masked_border);
+    cv::remap(colour.mul(weight3), sampled_colour, window_x, window_y, cv::INTER_LINEAR,
+              masked_border);
+    cv::remap(weight3, sampled_weight, window_x, window_y, cv::INTER_LINEAR, masked_border);
     cv::Mat blended;
     cv::divide(sampled_colour, cv::max(sampled_weight, 1e-6), blended);
     blended.convertTo(out.rgb, CV_8UC3);

@@ -2,6 +2,7 @@
 // reuse: exact where the transform is exact, low where it is wrong.
 #include "tessera/match/fidelity.h"
 
+#include <cmath>
 #include <numbers>
 #include <random>
 
@@ -127,6 +128,53 @@ TEST(Fidelity, MaskedOutTexelsDoNotBleedIntoTheirNeighbours) {
       const cv::Vec3b v = rendered.rgb.at<cv::Vec3b>(r, c);
       EXPECT_EQ(v, cv::Vec3b(100, 150, 200)) << c << "," << r;
     }
+  }
+}
+
+// A small grid placed inside a large masked texture reads only the window of texels its samples
+// touch; the colours are still the bilinear mean over the valid neighbours, up to the texture's
+// edges (texels past them count as masked out), as over the whole texture.
+TEST(Fidelity, AMaskedRenderOfASmallPlacementIsTheBilinearMeanOverValidTexels) {
+  const cv::Mat texture = randomRgb(200, 150, 47);
+  cv::Mat mask(150, 200, CV_8UC1, cv::Scalar(255));
+  cv::circle(mask, {130, 90}, 6, cv::Scalar(0), cv::FILLED);
+  cv::circle(mask, {196, 147}, 5, cv::Scalar(0), cv::FILLED);
+  // cv::remap's bilinear weights are in steps of 1/32 of a texel.
+  const auto expected = [&](double x_exact, double y_exact) {
+    const long x32 = std::lround(x_exact * 32.0), y32 = std::lround(y_exact * 32.0);
+    const auto x0 = static_cast<int>(x32 >> 5), y0 = static_cast<int>(y32 >> 5);
+    const double x = x0 + static_cast<double>(x32 & 31) / 32.0;
+    const double y = y0 + static_cast<double>(y32 & 31) / 32.0;
+    cv::Vec3d sum(0, 0, 0);
+    double weight = 0.0;
+    for (int dy = 0; dy <= 1; ++dy) {
+      for (int dx = 0; dx <= 1; ++dx) {
+        const int tx = x0 + dx, ty = y0 + dy;
+        if (tx < 0 || ty < 0 || tx >= 200 || ty >= 150 || mask.at<std::uint8_t>(ty, tx) == 0) {
+          continue;
+        }
+        const double w = (dx ? x - x0 : 1.0 - (x - x0)) * (dy ? y - y0 : 1.0 - (y - y0));
+        sum += w * cv::Vec3d(texture.at<cv::Vec3b>(ty, tx));
+        weight += w;
+      }
+    }
+    return sum / weight;
+  };
+  for (const core::Similarity2& placement :
+       {core::Similarity2{1.0, 0.0, 120.3, 80.6}, core::Similarity2{0.0, 1.0, 190.0, 130.25}}) {
+    const Rendered rendered = renderThrough(texture, mask, placement, 30, 20, false);
+    int checked = 0;
+    for (int r = 0; r < 20; ++r) {
+      for (int c = 0; c < 30; ++c) {
+        if (rendered.covered.at<std::uint8_t>(r, c) == 0) continue;
+        const Eigen::Vector2d p = placement.apply({c, r});
+        const cv::Vec3d want = expected(p.x(), p.y());
+        const cv::Vec3b got = rendered.rgb.at<cv::Vec3b>(r, c);
+        for (int k = 0; k < 3; ++k) EXPECT_NEAR(got[k], want[k], 1.01) << c << "," << r;
+        ++checked;
+      }
+    }
+    EXPECT_GT(checked, 200);
   }
 }
 
