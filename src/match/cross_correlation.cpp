@@ -84,20 +84,21 @@ class TileCorrelator {
     // Sum of the zero-mean tile's squares: its variance times its texels.
     const double tile_energy = tile_std[0] * tile_std[0] * static_cast<double>(tile.total());
     const cv::Rect at_origin(cv::Point(), valid);
-    cv::Mat first = normalise(transform(tile_spectrum, /*conjugate=*/true)(at_origin), tile.size(),
-                              tile_energy);
+    cv::Mat first = normalise(transform(tile_spectrum, /*conjugate=*/true, valid.height)(at_origin),
+                              tile.size(), tile_energy);
     if (!half_turn_too) return {first, {}};
     const cv::Rect further_on(cv::Point(tile.cols - 1, tile.rows - 1), valid);
-    return {first,
-            normalise(transform(tile_spectrum, false)(further_on), tile.size(), tile_energy)};
+    return {first, normalise(transform(tile_spectrum, false, image_size_.height)(further_on),
+                             tile.size(), tile_energy)};
   }
 
  private:
-  // The image's correlation with the tile (conjugate) or convolution with it, whole.
-  cv::Mat transform(const cv::Mat& tile_spectrum, bool conjugate) const {
+  // The image's correlation with the tile (conjugate) or convolution with it, its first `rows`
+  // rows computed (the rest of the padded output is not read).
+  cv::Mat transform(const cv::Mat& tile_spectrum, bool conjugate, int rows) const {
     cv::Mat product, out;
     cv::mulSpectrums(spectrum_, tile_spectrum, product, 0, conjugate);
-    cv::idft(product, out, cv::DFT_SCALE | cv::DFT_REAL_OUTPUT);
+    cv::idft(product, out, cv::DFT_SCALE | cv::DFT_REAL_OUTPUT, rows);
     return out;
   }
 
