@@ -184,6 +184,11 @@ void LoopFigures::addTo(json& report) const {
   report["pose_graph_optimisations"] = loops.optimisations;
   report["pose_graph_ms"] = loops.pose_graph_ms;
   report["loop_keyframe_ms"] = loops.keyframe_ms;
+  // ... and its parts (the rest: bookkeeping and waiting for the CPU between them).
+  report["loop_information_ms"] = loops.information_ms;
+  report["loop_place_lookup_ms"] = loops.place_lookup_ms;
+  report["loop_place_index_ms"] = loops.place_index_ms;
+  report["loop_verification_ms"] = loops.verification_ms;
   report["loop_patches_retired_in_db"] = instances_retired;
   report["loop_wait_s"] = wait_s;
   report["tsdf_corrected"] = tsdf_corrected;
