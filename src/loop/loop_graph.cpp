@@ -6,6 +6,8 @@
 
 #include <spdlog/spdlog.h>
 
+#include "tessera/core/cpu_time.h"
+
 namespace tessera::loop {
 
 namespace {
@@ -88,6 +90,7 @@ int LoopGraph::newestOfAnotherSegment(int query) const {
 
 void LoopGraph::add(const fusion::KeyframeRecord& record, bool depth_thinned) {
   const auto start = std::chrono::steady_clock::now();
+  const double cpu_start_s = core::threadCpuSeconds();
   KeyframeView key;
   key.id = static_cast<int>(keyframes_.size());
   key.timestamp_ns = record.timestamp_ns;
@@ -218,6 +221,7 @@ void LoopGraph::add(const fusion::KeyframeRecord& record, bool depth_thinned) {
   ++stats_.keyframes;
   if (dirty_) optimise();
   stats_.keyframe_ms += msSince(start);
+  stats_.keyframe_cpu_ms += 1e3 * (core::threadCpuSeconds() - cpu_start_s);
 }
 
 bool LoopGraph::coveredByOlder(int query) const {

@@ -184,6 +184,7 @@ void LoopFigures::addTo(json& report) const {
   report["pose_graph_optimisations"] = loops.optimisations;
   report["pose_graph_ms"] = loops.pose_graph_ms;
   report["loop_keyframe_ms"] = loops.keyframe_ms;
+  report["loop_keyframe_cpu_ms"] = loops.keyframe_cpu_ms;
   // ... and its parts (the rest: bookkeeping and waiting for the CPU between them).
   report["loop_information_ms"] = loops.information_ms;
   report["loop_place_lookup_ms"] = loops.place_lookup_ms;

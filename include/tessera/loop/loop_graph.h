@@ -52,6 +52,7 @@ struct LoopStats {
   std::size_t optimisations = 0;
   double pose_graph_ms = 0.0;  // all optimisations together
   double keyframe_ms = 0.0;    // all keyframes' work together, optimisations included
+  double keyframe_cpu_ms = 0.0;  // ... the CPU time of it (the wall time waits for the CPU)
   double information_ms = 0.0;   // odometry edges' information matrices
   double place_lookup_ms = 0.0;  // place recognition: the lookups
   double place_index_ms = 0.0;   // ... and adding keyframes to the index
