@@ -154,7 +154,10 @@ void LoopGraph::add(const fusion::KeyframeRecord& record, bool depth_thinned) {
   place.newest_allowed = std::max(static_cast<int>(last_far - keyframes_.begin()) - 1, unjoined);
   const auto lookup_start = std::chrono::steady_clock::now();
   std::vector<fusion::PlaceCandidate> candidates;
-  const bool following_revisit = last_revisit_query_ >= 0 &&
+  // A revisit waiting for another to confirm it is followed up at every keyframe; once
+  // confirmed, the walk through a known place looks itself up at the usual cadence (each
+  // revisit found then is confirmed by the accepted one before it).
+  const bool following_revisit = last_revisit_query_ >= 0 && !last_revisit_accepted_ &&
                                  query.id - last_revisit_query_ <= config_.confirm_within_keyframes;
   // A segment not joined to the first looks itself up at every keyframe until it is.
   const bool adrift = rootOf(query.id) != rootOf(0);
@@ -189,6 +192,7 @@ void LoopGraph::add(const fusion::KeyframeRecord& record, bool depth_thinned) {
     if (!revisit) continue;
     ++stats_.revisits_verified;
     last_revisit_query_ = query.id;
+    last_revisit_accepted_ = false;
     if (!joins && !withinDrift(candidate.keyframe, query.id, *revisit)) {
       ++stats_.rejected_as_drift;
       spdlog::debug("loop: keyframe {} -> {} rejected: more correction than drift explains",
@@ -205,6 +209,7 @@ void LoopGraph::add(const fusion::KeyframeRecord& record, bool depth_thinned) {
       loop.accepted = true;
     }
     if (loop.accepted) acceptLoop(loop);
+    last_revisit_accepted_ = loop.accepted;
     pending_.push_back(loop);
     break;  // one revisit per keyframe
   }

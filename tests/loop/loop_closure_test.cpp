@@ -149,10 +149,11 @@ struct TwoPasses {
 };
 
 // With `restart` the second pass starts a tracking segment (the tracker lost the camera).
-void walkTwice(TwoPasses& passes, const core::Isometry& offset, bool restart = false) {
+void walkTwice(TwoPasses& passes, const core::Isometry& offset, bool restart = false,
+               int frame_step = 20) {
   const synthetic::Scene office = scene("office.yaml");
   for (int pass = 0; pass < 2; ++pass) {
-    for (int frame = 0; frame <= 100; frame += 20) {
+    for (int frame = 0; frame <= 100; frame += frame_step) {
       const core::Isometry truth = office.cameraPose(frame);
       const core::Isometry tracked = pass == 0 ? truth : core::Isometry(offset * truth);
       auto record = keyframeOf(test::officeFrameAt(office, truth, 1000 * pass + frame), tracked);
@@ -205,6 +206,22 @@ std::vector<double> secondPassErrors(const TwoPasses& passes) {
             .norm());
   }
   return errors;
+}
+
+// A revisit is followed up at the next keyframe until another confirms it; then the walk
+// through the known place looks itself up at the usual cadence (every 2nd keyframe), not at
+// every one, and adds a loop edge at every other keyframe, not at each.
+TEST(LoopGraph, AConfirmedRevisitIsFollowedAtTheUsualCadence) {
+  const core::Isometry drift = core::Isometry(Eigen::Translation3d(0.10, -0.05, 0.04)) *
+                               Eigen::AngleAxisd(2.0 * M_PI / 180.0, Eigen::Vector3d::UnitZ());
+  TwoPasses passes{LoopGraph(twoPassConfig()), {}};
+  walkTwice(passes, drift, false, 5);  // 21 keyframes a pass
+  const LoopStats& stats = passes.graph.stats();
+  // Following every revisit verified 6 here and added 6 loop edges.
+  EXPECT_GE(stats.loop_closures, 2u);
+  EXPECT_LE(stats.revisits_verified, 4u);
+  EXPECT_LE(stats.loop_closures, 4u);
+  for (const double error : secondPassErrors(passes)) EXPECT_LT(error, 0.03);
 }
 
 TEST(LoopGraph, ASegmentAfterALossIsJoinedAcrossAJumpLargerThanTheDriftBound) {

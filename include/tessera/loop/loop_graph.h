@@ -135,6 +135,7 @@ class LoopGraph {
   std::vector<int> segment_start_;   // per segment, its first keyframe
   std::vector<int> segment_parent_;  // per segment, union-find parent
   int last_revisit_query_ = -1;  // the last keyframe whose lookup verified a revisit
+  bool last_revisit_accepted_ = false;  // ... and whether it was confirmed
   bool dirty_ = false;  // loops added since the last optimisation
   LoopStats stats_;
 };
