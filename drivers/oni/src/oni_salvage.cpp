@@ -102,8 +102,15 @@ void writePlayableCopy(const std::filesystem::path& path, const OniDiagnosis& di
     std::memcpy(tail + 12, &no_limit, 8);
     std::memcpy(tail + 20, &no_table, 8);
   }
+  // End with an end record, as a complete file does. Without one, OpenNI2's player thread
+  // runs off the end of the file and sometimes crashes while the device is being closed.
+  unsigned char end[kRecordHeaderBytes] = {};
+  const std::uint32_t end_fields[5] = {kRecordMagic, kEnd, 0,
+                                       static_cast<std::uint32_t>(kRecordHeaderBytes), 0};
+  std::memcpy(end, end_fields, sizeof(end_fields));  // then an undo offset of 0
   std::ofstream out(copy, std::ios::binary | std::ios::trunc);
   out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+  out.write(reinterpret_cast<const char*>(end), sizeof(end));
   out.close();
   if (!in || !out) {
     throw core::Error(

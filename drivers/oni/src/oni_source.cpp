@@ -206,13 +206,16 @@ std::optional<std::size_t> OniSource::frameCount() const {
   return static_cast<std::size_t>(device_->depth_frames);
 }
 
+std::string OniSource::truncationEnd() const {
+  if (truncation_.empty()) return "";
+  return fmt::format("{}; playback ends after frame {}", truncation_, frames_out_);
+}
+
 core::ReadResult OniSource::read() {
   core::ReadResult result;  // kEndOfData
   Device& d = *device_;
   if (ended_ || (d.depth_frames >= 0 && d.depth_read >= static_cast<std::size_t>(d.depth_frames))) {
-    if (!ended_ && !truncation_.empty()) {
-      result.problem = fmt::format("{}; playback ends after frame {}", truncation_, frames_out_);
-    }
+    if (!ended_) result.problem = truncationEnd();
     ended_ = true;
     return result;
   }
@@ -246,19 +249,19 @@ core::ReadResult OniSource::read() {
     if (status != openni::STATUS_OK || ready < 0) {
       ended_ = true;
       if (d.depth_frames < 0) return result;  // length unknown: a stall is the end
-      result.problem =
-          !truncation_.empty()
-              ? fmt::format("{}; playback ends after frame {}", truncation_, frames_out_)
-              : fmt::format(
-                    "{}: the recording ends early after frame {} of {} "
-                    "(truncated or corrupt)",
-                    path_.string(), d.depth_read, d.depth_frames);
+      result.problem = !truncation_.empty()
+                           ? truncationEnd()
+                           : fmt::format(
+                                 "{}: the recording ends early after frame {} of {} "
+                                 "(truncated or corrupt)",
+                                 path_.string(), d.depth_read, d.depth_frames);
       return result;
     }
     if (streams[ready]->readFrame(&ref) != openni::STATUS_OK) continue;
     if (ready == 0) {
       if (ref.getFrameIndex() <= d.last_depth_index) {  // wrapped around: the recording ended
         ended_ = true;
+        result.problem = truncationEnd();
         return result;
       }
       d.last_depth_index = ref.getFrameIndex();

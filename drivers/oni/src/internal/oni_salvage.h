@@ -21,7 +21,8 @@ struct OniDiagnosis {
 OniDiagnosis diagnoseOni(const std::filesystem::path& path);
 
 // Copies the whole records of a truncated file to `copy`, with the stream headers reset to
-// "length unknown, no seek table" so that OpenNI2 opens it. Throws core::Error on I/O failure.
+// "length unknown, no seek table" and an end record after the last whole record, so that
+// OpenNI2 opens and plays it as it plays a complete file. Throws core::Error on I/O failure.
 void writePlayableCopy(const std::filesystem::path& path, const OniDiagnosis& diagnosis,
                        const std::filesystem::path& copy);
 

@@ -43,6 +43,8 @@ class OniSource : public core::FrameSource {
   struct Device;
   void open();
   void closeDevice();
+  // The end-of-playback message of a truncated file ("" for a whole one).
+  std::string truncationEnd() const;
 
   std::filesystem::path path_;
   OniSourceOptions options_;
