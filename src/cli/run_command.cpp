@@ -73,6 +73,18 @@ CLI::App* addRunCommand(CLI::App& app, RunArguments& args) {
   run->add_option("--tf-camera-frame", args.published_camera_frame,
                   "--publish: the tf frame tessera moves with the camera pose (map -> it)")
       ->capture_default_str();
+  run->add_option("--skip-frames", args.skip_frames,
+                  "Start after this many good frames of SOURCE (a recording replayed from the "
+                  "middle; with --max-frames, a range of it)")
+      ->capture_default_str();
+  run->add_option("--continue", args.continue_dir,
+                  "Continue the map saved in this run folder (OUT/map, written at the end of "
+                  "every run): its first frames are relocalised in it, surfaces seen again grow "
+                  "its patches, its database is reused, and the merged map is written back to "
+                  "it (it becomes OUT)");
+  run->add_flag("--no-save-map", args.no_save_map,
+                "Do not write OUT/map (the state --continue needs: keyframes, patches, colour "
+                "samples)");
   run->add_flag("--quiet", args.quiet,
                 "No progress line on a terminal, nor periodic progress lines in a log");
   addSourceOptions(*run, args.source_args);
@@ -84,6 +96,13 @@ int runCommand(const RunArguments& args) {
     const pipeline::RunConfig config = pipeline::loadRunConfig(
         args.config.empty() ? std::nullopt : std::optional<std::filesystem::path>(args.config));
 
+    if (!args.continue_dir.empty() && args.out_dir != RunArguments{}.out_dir &&
+        std::filesystem::path(args.out_dir) != std::filesystem::path(args.continue_dir)) {
+      throw core::ConfigError(
+          fmt::format("--continue {} writes the merged map back to that folder: leave out --out {}",
+                      args.continue_dir, args.out_dir));
+    }
+    const std::string out_dir = args.continue_dir.empty() ? args.out_dir : args.continue_dir;
     const std::string source_spec = args.source.empty() ? defaultRecording().string() : args.source;
     if (args.source.empty()) spdlog::info("no SOURCE given: replaying {}", source_spec);
     auto source = openSource(source_spec, args.source_args);
@@ -97,8 +116,8 @@ int runCommand(const RunArguments& args) {
       monitor::MonitorServerOptions server_options;
       server_options.listen = monitor::parseListenAddress(args.monitor);
       server_options.token = args.monitor_token;
-      server_options.db = args.db.empty() ? (std::filesystem::path(args.out_dir) / "textures.db").string()
-                                          : args.db;
+      server_options.db =
+          args.db.empty() ? (std::filesystem::path(out_dir) / "textures.db").string() : args.db;
       server = std::make_unique<monitor::MonitorServer>(monitor, server_options);
       spdlog::info("monitor: {}{}", server->url(),
                    args.monitor_token.empty() ? "" : " (bearer token required)");
@@ -108,7 +127,10 @@ int runCommand(const RunArguments& args) {
     pipeline::RunOptions run_options;
     run_options.monitor = &monitor;
     run_options.listener = publisher.get();
-    run_options.out_dir = args.out_dir;
+    run_options.out_dir = out_dir;
+    run_options.skip_frames = args.skip_frames;
+    run_options.continue_map = !args.continue_dir.empty();
+    run_options.save_map = !args.no_save_map;
     run_options.threads = threads;
     run_options.poses =
         args.poses == "gt" ? pipeline::PoseSource::kGroundTruth : pipeline::PoseSource::kTrack;
@@ -176,7 +198,7 @@ int runCommand(const RunArguments& args) {
             : std::string());
     spdlog::info("TSDF {:.1f} MB, mesh {} vertices, peak RSS {:.0f} MB; wrote {}/",
                  static_cast<double>(summary.integration.tsdf_bytes) / 1e6,
-                 summary.exported.mesh_vertices, summary.peak_rss_mb, args.out_dir);
+                 summary.exported.mesh_vertices, summary.peak_rss_mb, out_dir);
     return 0;
   } catch (const core::Error& e) {
     spdlog::error("{}", e.what());

@@ -20,6 +20,9 @@ struct RunArguments {
   std::string db;
   std::string monitor;        // [ADDR:]PORT of the HTTP monitor; empty: none
   std::string monitor_token;  // required by the monitor when not empty
+  std::size_t skip_frames = 0;  // --skip-frames
+  std::string continue_dir;     // --continue: the run folder whose saved map this run continues
+  bool no_save_map = false;     // --no-save-map
   bool quiet = false;         // no progress line or periodic progress log
   // ROS 1: where to publish the map (ros://[HOST:PORT], or none); empty: a ros:// source's
   // own graph, else nowhere.

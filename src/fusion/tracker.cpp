@@ -188,6 +188,7 @@ struct Keyframe {
 // A keyframe as kept for relocalisation once its images are dropped.
 struct PastKeyframe {
   int id = -1;  // the keyframe's; its place in the index is its place in State::past
+  std::int64_t timestamp_ns = 0;
   core::Isometry T_W_C = core::Isometry::Identity();
   FeatureFrame features;
 };
@@ -230,6 +231,8 @@ struct Tracker::State {
   std::int64_t last_motion_ns = 0;
   int lost_in_a_row = 0;
   bool interrupted = false;
+  // An earlier session's map was given (continueMap) and no frame is posed in it yet.
+  bool awaiting_map = false;
 };
 
 Tracker::Tracker(const TrackerConfig& config)
@@ -240,6 +243,26 @@ Tracker::~Tracker() = default;
 void Tracker::sourceInterrupted() {
   state_->interrupted = true;
   state_->last_motion.reset();
+}
+
+std::vector<MapKeyframe> Tracker::mapKeyframes() const {
+  std::vector<MapKeyframe> out;
+  out.reserve(state_->past.size());
+  for (const PastKeyframe& past : state_->past) {
+    out.push_back({past.timestamp_ns, past.T_W_C, past.features});
+  }
+  return out;
+}
+
+void Tracker::continueMap(const std::vector<MapKeyframe>& keyframes) {
+  State& s = *state_;
+  if (s.reference) throw core::Error("Tracker::continueMap: call it before the first frame");
+  for (const MapKeyframe& keyframe : keyframes) {
+    s.places.add(static_cast<int>(s.past.size()), keyframe.features.descriptors);
+    s.past.push_back(
+        {s.keyframes_made++, keyframe.timestamp_ns, keyframe.T_W_C, keyframe.features});
+  }
+  s.awaiting_map = !s.past.empty();
 }
 
 TrackingResult Tracker::track(const core::Frame& frame, const core::Isometry& initial_T_W_C) {
@@ -301,7 +324,7 @@ TrackingResult Tracker::track(const core::Frame& frame, const core::Isometry& in
     keyframe->features = describeFeatures(images.grey, images.depth_m, k, config_.features);
     if (config_.relocalise_against_all_keyframes && !coveredByPast(T_W_C)) {
       s.places.add(static_cast<int>(s.past.size()), keyframe->features.descriptors);
-      s.past.push_back({keyframe->id, T_W_C, keyframe->features});
+      s.past.push_back({keyframe->id, timestamp_ns, T_W_C, keyframe->features});
     }
     auto record = std::make_shared<KeyframeRecord>();
     record->timestamp_ns = timestamp_ns;
@@ -343,6 +366,48 @@ TrackingResult Tracker::track(const core::Frame& frame, const core::Isometry& in
     return result;
   }
   const bool prepared = prepare(current.odometry, cv::rgbd::OdometryFrame::CACHE_SRC);
+  std::optional<FeatureFrame> current_features;
+  // The pose of the current frame from features against the most voted of the kept
+  // keyframes up to `newest_allowed` (-1: all) that gives one.
+  const auto lookUpPlaces = [&](int newest_allowed) -> std::optional<core::Isometry> {
+    PlaceQuery query;
+    query.min_votes = config_.relocalisation_min_votes;
+    query.max_candidates = config_.relocalisation_candidates;
+    query.newest_allowed = newest_allowed;
+    if (!current_features) {
+      current_features = describeFeatures(current.grey, current.depth_m, k, config_.features);
+    }
+    const std::vector<PlaceCandidate> candidates = s.places.query(
+        strongestDescriptors(*current_features, kRelocalisationQueryDescriptors), query);
+    for (const PlaceCandidate& candidate : candidates) {
+      const PastKeyframe& key = s.past[static_cast<std::size_t>(candidate.keyframe)];
+      const auto pose = estimateFeaturePose(key.features, *current_features, k, config_.features);
+      if (pose) return core::Isometry(key.T_W_C * pose->T_current_reference.inverse());
+    }
+    return std::nullopt;
+  };
+  if (prepared && !s.reference && s.awaiting_map) {
+    // A continued map: the session starts where its first frame is found in it.
+    if (const auto found = lookUpPlaces(-1)) {
+      if (!makeKeyframe(current, *found, frame.timestamp_ns, true)) {
+        result.status = TrackingStatus::kLost;
+        return result;
+      }
+      s.awaiting_map = false;
+      result.from_features = true;
+      result.relocalised_globally = true;
+      return accept(TrackingStatus::kRelocalised, *found, 0);
+    }
+    if (++s.lost_in_a_row < config_.lost_frames_before_restart) {
+      result.problem = "not found in the continued map yet";
+      result.status = TrackingStatus::kLost;
+      return result;
+    }
+    s.awaiting_map = false;
+    result.problem = fmt::format(
+        "not found in the continued map in {} frames: this session maps in its own frame",
+        s.lost_in_a_row);
+  }
   if (prepared && !s.reference) {
     if (!makeKeyframe(current, initial_T_W_C, frame.timestamp_ns, true)) {
       result.status = TrackingStatus::kLost;
@@ -391,7 +456,6 @@ TrackingResult Tracker::track(const core::Frame& frame, const core::Isometry& in
     }
     return key.T_W_C * T_key_current;
   };
-  std::optional<FeatureFrame> current_features;
   // The pose of the current frame from features against keyframe `key`, as the new guess.
   const auto guessFromFeatures = [&](const Keyframe& key) {
     if (!current_features) {
@@ -418,30 +482,15 @@ TrackingResult Tracker::track(const core::Frame& frame, const core::Isometry& in
     }
     if (!T_W_C && config_.relocalise_against_all_keyframes && !s.keyframes.empty()) {
       // Older keyframes: the most voted first; the feature pose alone (their images are gone),
-      // and the frame becomes a keyframe that starts a segment there.
-      PlaceQuery query;
-      query.min_votes = config_.relocalisation_min_votes;
-      query.max_candidates = config_.relocalisation_candidates;
-      // The recent keyframes were tried: only those kept before them are candidates.
-      query.newest_allowed = newestKeptBefore(s.past, s.keyframes.front()->id);
-      if (!current_features) {
-        current_features = describeFeatures(current.grey, current.depth_m, k, config_.features);
-      }
-      const std::vector<PlaceCandidate> candidates =
-          query.newest_allowed < 0
-              ? std::vector<PlaceCandidate>{}
-              : s.places.query(
-                    strongestDescriptors(*current_features, kRelocalisationQueryDescriptors),
-                    query);
-      for (const PlaceCandidate& candidate : candidates) {
-        const PastKeyframe& key = s.past[static_cast<std::size_t>(candidate.keyframe)];
-        const auto pose = estimateFeaturePose(key.features, *current_features, k, config_.features);
-        if (!pose) continue;
-        const core::Isometry found = key.T_W_C * pose->T_current_reference.inverse();
-        if (!makeKeyframe(current, found, frame.timestamp_ns, true)) break;
-        result.from_features = true;
-        result.relocalised_globally = true;
-        return accept(TrackingStatus::kRelocalised, found, 0);
+      // and the frame becomes a keyframe that starts a segment there. The recent keyframes
+      // were tried: only those kept before them are candidates.
+      const int newest_allowed = newestKeptBefore(s.past, s.keyframes.front()->id);
+      if (const auto found = newest_allowed < 0 ? std::nullopt : lookUpPlaces(newest_allowed)) {
+        if (makeKeyframe(current, *found, frame.timestamp_ns, true)) {
+          result.from_features = true;
+          result.relocalised_globally = true;
+          return accept(TrackingStatus::kRelocalised, *found, 0);
+        }
       }
     }
     if (!T_W_C && s.interrupted) {

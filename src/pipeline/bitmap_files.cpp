@@ -33,6 +33,14 @@ void BitmapFiles::keep(std::optional<texture::PatchBitmap> built) {
   }
 }
 
+void BitmapFiles::adopt(const planes::TextureBindings& earlier) {
+  for (const auto& [id, binding] : earlier) {
+    if (written_.emplace(id, binding).second) {
+      bitmap_bytes_ += 3 * static_cast<std::size_t>(binding.width) * binding.height;
+    }
+  }
+}
+
 void BitmapFiles::flush() {
   for (auto it = unwritten_.begin(); it != unwritten_.end(); it = unwritten_.erase(it)) {
     written_.emplace(it->first, texture::writeBitmapFiles(it->second, out_dir_));

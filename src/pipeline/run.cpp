@@ -4,8 +4,10 @@
 #include <filesystem>
 
 #include <fmt/format.h>
+#include <spdlog/spdlog.h>
 
 #include "internal/run_parts.h"
+#include "internal/saved_map.h"
 #include "tessera/core/cpu_time.h"
 #include "tessera/core/error.h"
 #include "tessera/pipeline/flow_graph.h"
@@ -45,9 +47,20 @@ void addRunFiles(std::vector<std::filesystem::path>& files, const std::filesyste
 // Builds the stages (run_parts.cpp), runs them as a flow graph (flow_graph.cpp), sums up the
 // run (run_summary.cpp) and exports the map (run_export.cpp).
 RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
-                       const RunOptions& options) {
+                       const RunOptions& given) {
+  RunOptions options = given;
+  std::optional<internal::SavedMap> earlier;
+  if (options.continue_map) {
+    // Read whole before anything is written: a map that cannot be continued changes nothing.
+    earlier = internal::readSavedMap(options.out_dir, config.patches, options.out_dir / "samples");
+    if (!options.db) options.db = earlier->database;
+    spdlog::info("continuing the map in {} (session {}): {} keyframes, {} patches",
+                 (options.out_dir / "map").string(), earlier->sessions + 1,
+                 earlier->keyframes.size(), earlier->patches.patches().size());
+  }
   createOutputDir(options.out_dir);
   internal::RunParts parts(source, config, options);
+  if (earlier) internal::continueMap(parts, *earlier);
   const auto start = std::chrono::steady_clock::now();
   const PipelineConfig& pipeline = config.pipeline;
   const bool live = source.isLive();
@@ -63,6 +76,18 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
 
   RunSummary summary = internal::summariseRun(parts, options, wall_s);
   std::vector<std::filesystem::path> files = internal::exportRun(parts, options, summary);
+  if (options.save_map) {
+    try {
+      internal::saveMap(parts, options.out_dir, earlier ? &*earlier : nullptr);
+    } catch (const std::exception& e) {
+      spdlog::error("the map was not saved for --continue ({}); the earlier saved map is kept",
+                    e.what());
+    }
+  }
+  {
+    std::error_code ignored;
+    std::filesystem::remove_all(parts.sample_dir, ignored);
+  }
   summary.peak_rss_mb = peakRssMb();
   summary.cpu.stream_s = summary.stream.cpu_stream_s;
   summary.cpu.elapsed_stream_s = summary.stream.elapsed_stream_s;

@@ -106,8 +106,6 @@ std::vector<std::filesystem::path> exportRun(RunParts& parts, const RunOptions& 
   summary.exported.mesh_vertices = mesh.vertices.size();
   fusion::writePly(mesh, file("mesh.ply"));
   const planes::PatchMap& patches = parts.planes.map();
-  std::error_code ignored;
-  std::filesystem::remove_all(parts.sample_dir, ignored);
   parts.bitmaps.flush();
   planes::TextureBindings textures =
       texture::currentBindings(parts.bitmaps.written(), patches, options.out_dir);

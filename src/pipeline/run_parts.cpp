@@ -8,6 +8,7 @@ namespace {
 
 std::optional<std::size_t> framesTotal(const core::FrameSource& input, const RunOptions& options) {
   std::optional<std::size_t> total = input.frameCount();
+  if (total) total = *total - std::min(*total, options.skip_frames);
   if (total && options.max_frames) total = std::min(*total, *options.max_frames);
   return total;
 }
@@ -41,7 +42,7 @@ std::unique_ptr<db::TextureStore> openStore(const RunOptions& options) {
 RunParts::RunParts(core::FrameSource& input, const RunConfig& config, const RunOptions& options)
     : source(input),
       sample_dir(options.out_dir / "samples"),
-      source_stage(input, options.max_frames, options.stop),
+      source_stage(input, options.max_frames, options.stop, options.skip_frames),
       loop_closer(config.loop_closure.enabled && options.poses == PoseSource::kTrack
                       ? std::make_unique<loop::LoopCloser>(config.loop_closure)
                       : nullptr),

@@ -82,6 +82,11 @@ void TrackingFigures::addTo(json& report) const {
   report["tracking_restarts"] = tracking_restarts;
   report["relocalisations"] = relocalisations;
   report["feature_poses"] = feature_poses;
+  if (continued_map_keyframes > 0) {
+    report["continued_map_keyframes"] = continued_map_keyframes;
+    report["continued_map_found_at_frame"] =
+        continued_map_found_at_frame ? json(*continued_map_found_at_frame) : json(nullptr);
+  }
 }
 
 void IntegrationFigures::addTo(json& report) const {

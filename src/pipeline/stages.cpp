@@ -22,8 +22,8 @@ bool farFrom(const core::Isometry& T_W_reference, const core::Isometry& T_W_C) {
 }  // namespace
 
 SourceStage::SourceStage(core::FrameSource& source, std::optional<std::size_t> max_frames,
-                         const std::atomic<bool>* stop)
-    : source_(source), max_frames_(max_frames), stop_(stop) {
+                         const std::atomic<bool>* stop, std::size_t skip_frames)
+    : source_(source), max_frames_(max_frames), stop_(stop), skip_frames_(skip_frames) {
   figures_.live = source.isLive();
 }
 
@@ -51,6 +51,10 @@ std::optional<core::Frame> SourceStage::read() {
     if (source_.isLive()) frames_dropped_so_far_ = source_.liveStats().frames_dropped;
     switch (result.status) {
       case core::ReadStatus::kFrame:
+        if (skip_frames_ > 0) {
+          --skip_frames_;
+          continue;
+        }
         ++frames_read_;
         return std::move(result.frame);
       case core::ReadStatus::kBadFrame:
@@ -85,6 +89,13 @@ TrackingStage::TrackingStage(const fusion::TrackerConfig& tracker, PoseSource po
   figures_.poses = poses == PoseSource::kTrack ? "track" : "gt";
 }
 
+void TrackingStage::continueMap(const std::vector<fusion::MapKeyframe>& keyframes) {
+  figures_.continued_map_keyframes = keyframes.size();
+  if (poses_ != PoseSource::kTrack || keyframes.empty()) return;
+  tracker_.continueMap(keyframes);
+  awaiting_map_ = true;
+}
+
 std::optional<core::Isometry> TrackingStage::poseOf(
     const core::Frame& frame, std::string& problem,
     std::vector<std::shared_ptr<const fusion::KeyframeRecord>>& new_keyframes) {
@@ -103,6 +114,16 @@ std::optional<core::Isometry> TrackingStage::poseOf(
   }
   for (const auto& keyframe : tracked.new_keyframes) keyframe_ns_ = keyframe->timestamp_ns;
   new_keyframes = tracked.new_keyframes;
+  if (awaiting_map_) {
+    awaiting_map_ = false;
+    if (tracked.status == fusion::TrackingStatus::kRelocalised) {
+      figures_.continued_map_found_at_frame = frame.index;
+      spdlog::info("frame {}: found in the continued map; this session maps in its frame",
+                   frame.index);
+      return tracked.T_W_C;
+    }
+    spdlog::warn("frame {}: {}", frame.index, tracked.problem);
+  }
   if (tracked.from_features) ++figures_.feature_poses;
   if (tracked.status == fusion::TrackingStatus::kRelocalised) {
     ++figures_.relocalisations;

@@ -198,6 +198,16 @@ CommitRecord CommitStage::process(DescribedPatch described) {
   return record;
 }
 
+void CommitStage::adopt(const std::map<int, std::vector<db::TextureInstance>>& earlier,
+                        const std::map<int, std::size_t>& texels) {
+  for (const auto& [patch_id, layers] : earlier) {
+    const auto size = texels.find(patch_id);
+    if (layers.empty() || size == texels.end()) continue;
+    instances_[patch_id] = layers;
+    shown_[patch_id] = reuse::shownPatch(size->second, layers, catalog_.loadLayers(layers));
+  }
+}
+
 void CommitStage::retire(int patch_id) {
   ScopedStageTime time(timer_);
   db::Commit commit;

@@ -88,6 +88,14 @@ struct TrackingResult {
   std::vector<std::shared_ptr<const KeyframeRecord>> new_keyframes;
 };
 
+// A keyframe of a map as the tracker relocalises against it: its time, pose and features.
+// What a later session that continues the map (`tessera run --continue`) starts from.
+struct MapKeyframe {
+  std::int64_t timestamp_ns = 0;
+  core::Isometry T_W_C = core::Isometry::Identity();
+  FeatureFrame features;
+};
+
 // Not thread-safe: owned by the fusion stage, which runs serially.
 class Tracker {
  public:
@@ -100,6 +108,15 @@ class Tracker {
   // The source was interrupted (a device lost and reconnected): the camera may have moved
   // meanwhile, so the next frame is relocalised rather than tracked from the last pose.
   void sourceInterrupted();
+
+  // Every keyframe kept to relocalise against (relocalise_against_all_keyframes), oldest first,
+  // at its tracked pose.
+  std::vector<MapKeyframe> mapKeyframes() const;
+  // Starts in an earlier session's map: its keyframes join those relocalised against, and the
+  // first frames are relocalised against them rather than started at initial_T_W_C. Until one
+  // is found they are lost; after lost_frames_before_restart of them the session starts in its
+  // own frame at initial_T_W_C, and TrackingResult::problem says so. Call before track().
+  void continueMap(const std::vector<MapKeyframe>& keyframes);
 
  private:
   struct State;

@@ -23,6 +23,7 @@ struct RunOptions {
   int threads = 0;  // 0: hardware threads
   PoseSource poses = PoseSource::kTrack;
   std::optional<std::size_t> max_frames;
+  std::size_t skip_frames = 0;  // the source's first good frames dropped unread by the map
   int holdout_every = 0;  // every N-th frame is posed only, for eval's held-out views (0: none)
   bool residual = false;  // map.obj / map.glb also get the non-planar rest of the TSDF surface
   // The texture database the run grows (or reuses from earlier runs); OUT/textures.db when
@@ -35,6 +36,11 @@ struct RunOptions {
   // Told every pose, committed or retired patch and the exported files (may be null).
   RunListener* listener = nullptr;
   const std::atomic<bool>* stop = nullptr;  // set (e.g. by Ctrl-C) to end the stream early
+  // Writes OUT/map at the end, for a later run to continue (internal/saved_map.h).
+  bool save_map = true;
+  // Continues the map saved in out_dir (`tessera run --continue DIR`): its keyframes, patches,
+  // bitmaps and database; the first frames are relocalised in it.
+  bool continue_map = false;
 };
 
 // The run's figures: each stage's own (stage_figures.h), side by side. report.json is each of

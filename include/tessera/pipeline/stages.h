@@ -40,8 +40,10 @@ struct CommitMessage;  // texture_db_stages.h
 class SourceStage {
  public:
   // `stop`, when given, ends the stream as soon as it is set (Ctrl-C, SIGTERM).
+  // The first `skip_frames` good frames are read and dropped (a recording replayed from the
+  // middle).
   SourceStage(core::FrameSource& source, std::optional<std::size_t> max_frames,
-              const std::atomic<bool>* stop = nullptr);
+              const std::atomic<bool>* stop = nullptr, std::size_t skip_frames = 0);
 
   // The next good frame (or interruption marker), or nothing at the end of the stream.
   std::optional<core::Frame> next();
@@ -61,6 +63,7 @@ class SourceStage {
   std::optional<std::size_t> max_frames_;
   const std::atomic<bool>* stop_;
   std::size_t frames_read_ = 0;
+  std::size_t skip_frames_ = 0;  // still to be dropped
   SourceFigures figures_;
   std::atomic<std::size_t> frames_dropped_so_far_{0};
   StageTimer timer_;
@@ -122,6 +125,12 @@ class TrackingStage {
 
   TrackedFrame process(core::Frame frame);
 
+  // An earlier session's keyframes (`tessera run --continue`): with tracked poses, the first
+  // frames are relocalised against them (fusion::Tracker::continueMap).
+  void continueMap(const std::vector<fusion::MapKeyframe>& keyframes);
+  // The keyframes a later session relocalises against, at their tracked poses.
+  std::vector<fusion::MapKeyframe> mapKeyframes() const { return tracker_.mapKeyframes(); }
+
   const TrackingFigures& figures() const { return figures_; }
   const StageTimer& timer() const { return timer_; }
 
@@ -136,6 +145,7 @@ class TrackingStage {
   PoseSource poses_;
   TrackingFigures figures_;
   std::optional<std::int64_t> keyframe_ns_;  // the newest keyframe's time
+  bool awaiting_map_ = false;                // continuing a map; no frame posed in it yet
   StageTimer timer_;
 };
 
@@ -192,6 +202,8 @@ class PlaneStage {
       std::shared_ptr<const loop::MapCorrection> last_correction = nullptr);
 
   const planes::PatchMap& map() const { return map_; }
+  // Continues an earlier session's map (`tessera run --continue`), before the first frame.
+  void continueMap(planes::PatchMap&& map) { map_ = std::move(map); }
   // Where finalized patches' colour samples go when they leave memory (PatchMap).
   void spillSamplesTo(std::filesystem::path dir) { map_.setSampleSpillDir(std::move(dir)); }
   PlaneFigures figures() const;
@@ -253,6 +265,8 @@ class BitmapFiles {
 
   // Where the newest bitmap of each patch id lies on its patch, and its files.
   const planes::TextureBindings& written() const { return written_; }
+  // The bitmaps of an earlier session whose map this run continues (their files are there).
+  void adopt(const planes::TextureBindings& earlier);
   // Build time of each bitmap, and their total area (m^2 of observed texels).
   const StageTimer& timer() const { return timer_; }
   double areaBuiltM2() const { return area_built_m2_; }

@@ -123,6 +123,10 @@ class CommitStage {
   // Patch `patch_id` was merged into another: its instances leave the database and the map.
   // A failed commit is counted and logged, as for process().
   void retire(int patch_id);
+  // The instances of an earlier session whose map this run continues, each patch's newest
+  // layers; `texels`: each patch's bitmap size, for the map's economy.
+  void adopt(const std::map<int, std::vector<db::TextureInstance>>& earlier,
+             const std::map<int, std::size_t>& texels);
 
   // The newest committed instances of each patch id (its layers, 0 first).
   const std::map<int, std::vector<db::TextureInstance>>& instances() const { return instances_; }

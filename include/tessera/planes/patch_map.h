@@ -258,6 +258,18 @@ class PatchMap {
   std::size_t releaseIdleSamples(long frame_index);
   std::size_t samplesReleased() const { return samples_released_; }
 
+  // The map for a later session to continue (`tessera run --continue`): planes, tiles, cells
+  // and finalization state to `file`, each tile's colour samples to
+  // samples_dir/patch_<id>.samples. Planes keep no record of this session's keyframes: the
+  // next session's pose graph does not hold them. Throws core::Error naming a file that
+  // cannot be written.
+  void saveState(const std::filesystem::path& file, const std::filesystem::path& samples_dir) const;
+  // Replaces the map with a saved one. Its samples are copied into the spill folder (set it
+  // first; without one they are read into memory) and read when their tile grows again.
+  // Throws core::Error naming a missing, corrupt or newer file, or one saved with other cell
+  // sizes; the map is unchanged then.
+  void loadState(const std::filesystem::path& file, const std::filesystem::path& samples_dir);
+
   const Patch* find(int id) const;
   // A copy of patch `id` for texturing (its outline traced, its samples listed).
   PatchSnapshot snapshot(const Patch& patch) const;

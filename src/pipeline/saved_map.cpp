@@ -1,0 +1,217 @@
+#include "internal/saved_map.h"
+
+#include <chrono>
+#include <fstream>
+
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+#include <nlohmann/json.hpp>
+
+#include "internal/run_parts.h"
+#include "tessera/core/error.h"
+#include "tessera/core/output_file.h"
+#include "tessera/fusion/map_keyframes.h"
+#include "tessera/texture/bitmap_export.h"
+
+namespace tessera::pipeline::internal {
+
+namespace {
+
+using nlohmann::json;
+namespace fs = std::filesystem;
+
+constexpr int kFormat = 1;
+
+json vector2(const Eigen::Vector2d& v) { return json::array({v.x(), v.y()}); }
+Eigen::Vector2d vector2(const json& j) { return {j.at(0).get<double>(), j.at(1).get<double>()}; }
+
+json bindingJson(const planes::TextureBinding& b) {
+  return {{"version", b.version},
+          {"image", b.image},
+          {"state_image", b.state_image},
+          {"texel_m", b.texel_m},
+          {"origin_uv", vector2(b.origin_uv)},
+          {"x_axis", vector2(b.x_axis)},
+          {"y_axis", vector2(b.y_axis)},
+          {"width", b.width},
+          {"height", b.height},
+          {"observed", b.observed},
+          {"inpainted", b.inpainted}};
+}
+
+planes::TextureBinding bindingOf(const json& j) {
+  planes::TextureBinding b;
+  b.version = j.at("version").get<int>();
+  b.image = j.at("image").get<std::string>();
+  b.state_image = j.at("state_image").get<std::string>();
+  b.texel_m = j.at("texel_m").get<double>();
+  b.origin_uv = vector2(j.at("origin_uv"));
+  b.x_axis = vector2(j.at("x_axis"));
+  b.y_axis = vector2(j.at("y_axis"));
+  b.width = j.at("width").get<int>();
+  b.height = j.at("height").get<int>();
+  b.observed = j.at("observed").get<std::size_t>();
+  b.inpainted = j.at("inpainted").get<std::size_t>();
+  return b;
+}
+
+json instanceJson(const db::TextureInstance& i) {
+  json j = {{"run_id", i.run_id},
+            {"patch_id", i.patch_id},
+            {"version", i.version},
+            {"layer", i.layer},
+            {"texture_id", i.texture_id},
+            {"transform", {i.transform.a, i.transform.b, i.transform.tx, i.transform.ty}},
+            {"reused", i.reused}};
+  if (i.psnr_db) j["psnr_db"] = *i.psnr_db;
+  return j;
+}
+
+db::TextureInstance instanceOf(const json& j) {
+  db::TextureInstance i;
+  i.run_id = j.at("run_id").get<std::int64_t>();
+  i.patch_id = j.at("patch_id").get<int>();
+  i.version = j.at("version").get<int>();
+  i.layer = j.at("layer").get<int>();
+  i.texture_id = j.at("texture_id").get<std::int64_t>();
+  const json& t = j.at("transform");
+  i.transform = {t.at(0).get<double>(), t.at(1).get<double>(), t.at(2).get<double>(),
+                 t.at(3).get<double>()};
+  i.reused = j.at("reused").get<bool>();
+  if (j.contains("psnr_db")) i.psnr_db = j.at("psnr_db").get<double>();
+  return i;
+}
+
+json readJson(const fs::path& path) {
+  std::ifstream in(path);
+  if (!in) throw core::Error(fmt::format("{}: missing", path.string()));
+  try {
+    return json::parse(in);
+  } catch (const json::exception& e) {
+    throw core::Error(fmt::format("{}: corrupt ({})", path.string(), e.what()));
+  }
+}
+
+void writeJson(const json& j, const fs::path& path) {
+  std::ofstream out = core::createOutputFile(path);
+  out << j.dump(1) << '\n';
+  core::finishOutputFile(out, path);
+}
+
+}  // namespace
+
+SavedMap readSavedMap(const fs::path& run_dir, const planes::PatchMapConfig& config,
+                      const fs::path& spill_dir) {
+  const fs::path dir = run_dir / "map";
+  if (!fs::is_directory(dir)) {
+    throw core::Error(fmt::format(
+        "{}: no saved map to continue (a run writes one in OUT/map when it ends)", dir.string()));
+  }
+  const fs::path session_file = dir / "session.json";
+  const json session = readJson(session_file);
+  SavedMap map;
+  try {
+    const int format = session.at("format").get<int>();
+    if (format > kFormat) {
+      throw core::Error(
+          fmt::format("{}: written by a newer tessera (map format {}, this one reads up to {})",
+                      session_file.string(), format, kFormat));
+    }
+    map.sessions = session.at("sessions").get<int>();
+    map.database = session.at("database").get<std::string>();
+    const json bitmaps = readJson(dir / "bitmaps.json");
+    for (const json& patch : bitmaps.at("patches")) {
+      const int id = patch.at("id").get<int>();
+      if (patch.contains("bitmap")) map.bitmaps[id] = bindingOf(patch.at("bitmap"));
+      for (const json& layer : patch.at("layers")) map.instances[id].push_back(instanceOf(layer));
+    }
+  } catch (const json::exception& e) {
+    throw core::Error(fmt::format("{}: corrupt ({})", dir.string(), e.what()));
+  }
+  for (const auto& [id, binding] : map.bitmaps) {
+    if (!fs::is_regular_file(run_dir / binding.image)) {
+      throw core::Error(fmt::format("{}: missing (the bitmap of patch {} in the saved map)",
+                                    (run_dir / binding.image).string(), id));
+    }
+  }
+  map.keyframes = fusion::readMapKeyframes(dir / "keyframes.bin");
+  map.patches = planes::PatchMap(config);
+  map.patches.setSampleSpillDir(spill_dir);
+  map.patches.loadState(dir / "patch_map.bin", dir / "samples");
+  return map;
+}
+
+void continueMap(RunParts& parts, SavedMap& earlier) {
+  parts.tracking.continueMap(earlier.keyframes);
+  parts.planes.continueMap(std::move(earlier.patches));
+  parts.bitmaps.adopt(earlier.bitmaps);
+  std::map<int, std::size_t> texels;
+  for (const auto& [id, binding] : earlier.bitmaps) {
+    texels[id] = static_cast<std::size_t>(binding.width) * binding.height;
+  }
+  parts.commit.adopt(earlier.instances, texels);
+}
+
+void saveMap(RunParts& parts, const fs::path& run_dir, const SavedMap* earlier) {
+  const auto start = std::chrono::steady_clock::now();
+  const fs::path dir = run_dir / "map";
+  const fs::path saving = run_dir / "map.saving";
+  const fs::path old = run_dir / "map.old";
+  std::error_code ignored;
+  fs::remove_all(saving, ignored);
+  fs::create_directories(saving);
+
+  const planes::PatchMap& patches = parts.planes.map();
+  patches.saveState(saving / "patch_map.bin", saving / "samples");
+  // Keyframes at their corrected poses; those of the earlier sessions as they were saved
+  // (this session's pose graph does not hold them).
+  std::vector<fusion::MapKeyframe> keyframes = parts.tracking.mapKeyframes();
+  const std::size_t earlier_count = earlier != nullptr ? earlier->keyframes.size() : 0;
+  if (keyframes.empty() && earlier != nullptr)
+    keyframes = earlier->keyframes;  // ground-truth poses
+  if (parts.loop_closer && parts.loop_closer->graph().stats().optimisations > 0) {
+    const loop::MapCorrection correction = parts.loop_closer->graph().correction();
+    for (std::size_t i = earlier_count; i < keyframes.size(); ++i) {
+      keyframes[i].T_W_C = correction.at(keyframes[i].timestamp_ns) * keyframes[i].T_W_C;
+    }
+  }
+  fusion::writeMapKeyframes(saving / "keyframes.bin", keyframes);
+
+  json list = json::array();
+  const planes::TextureBindings bitmaps =
+      texture::currentBindings(parts.bitmaps.written(), patches, run_dir);
+  for (const planes::Patch& patch : patches.patches()) {
+    json entry = {{"id", patch.id}, {"layers", json::array()}};
+    if (const auto it = bitmaps.find(patch.id); it != bitmaps.end()) {
+      entry["bitmap"] = bindingJson(it->second);
+    }
+    if (const auto it = parts.commit.instances().find(patch.id);
+        it != parts.commit.instances().end() && !it->second.empty() &&
+        it->second.front().version == patch.version) {
+      for (const db::TextureInstance& layer : it->second) {
+        entry["layers"].push_back(instanceJson(layer));
+      }
+    }
+    list.push_back(std::move(entry));
+  }
+  writeJson({{"patches", std::move(list)}}, saving / "bitmaps.json");
+  const int sessions = (earlier != nullptr ? earlier->sessions : 0) + 1;
+  writeJson({{"format", kFormat},
+             {"sessions", sessions},
+             {"database", parts.store->location()},
+             {"keyframes", keyframes.size()},
+             {"planes", patches.planes().size()},
+             {"patches", patches.patches().size()}},
+            saving / "session.json");
+
+  // The new map in, the old one out: at each moment one whole map is there.
+  fs::remove_all(old, ignored);
+  if (fs::exists(dir)) fs::rename(dir, old);
+  fs::rename(saving, dir);
+  fs::remove_all(old, ignored);
+  spdlog::info("map saved for --continue in {} ({} keyframes, {} patches, session {}) in {:.1f} s",
+               dir.string(), keyframes.size(), patches.patches().size(), sessions,
+               std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+}
+
+}  // namespace tessera::pipeline::internal

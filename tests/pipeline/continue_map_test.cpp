@@ -1,0 +1,153 @@
+// `tessera run --continue`: a map saved at the end of one run and continued by the next.
+#include <fstream>
+#include <set>
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include "support/test_data.h"
+#include "tessera/core/error.h"
+#include "tessera/drivers/oni/oni_source.h"
+#include "tessera/eval/run_evaluation.h"
+#include "tessera/pipeline/run.h"
+
+namespace tessera::pipeline {
+namespace {
+
+namespace fs = std::filesystem;
+
+nlohmann::json readJson(const fs::path& path) {
+  std::ifstream in(path);
+  return nlohmann::json::parse(in);
+}
+
+std::set<int> patchIds(const fs::path& run_dir) {
+  std::set<int> ids;
+  const nlohmann::json patches = readJson(run_dir / "patches.json");
+  for (const auto& patch : patches["patches"]) {
+    ids.insert(patch["id"].get<int>());
+  }
+  return ids;
+}
+
+// The office's first 160 frames, then its last 160 continuing that map with no pose hint:
+// the second session is found in the first one's map, its poses are in that frame (the first
+// session started at the ground truth), and the merged map has one patch per plane.
+TEST(ContinueMap, TwoSessionsOfTheOfficeEndWithOneMap) {
+  const fs::path recording = test::sourceDir() / "recordings/office.oni";
+  if (!fs::is_regular_file(recording)) {
+    GTEST_SKIP() << recording << " is not rendered (TESSERA_RENDER_DEFAULT_RECORDING=ON)";
+  }
+  const fs::path out = test::freshTempDir();
+  const RunConfig config = loadRunConfig(std::nullopt);
+  {
+    drivers::oni::OniSource source(recording);
+    RunOptions options;
+    options.out_dir = out;
+    options.max_frames = 160;
+    runPipeline(source, config, options);
+  }
+  const std::set<int> first_ids = patchIds(out);
+  ASSERT_GE(first_ids.size(), 6u);
+  ASSERT_TRUE(fs::is_regular_file(out / "map/session.json"));
+  {
+    drivers::oni::OniSource source(recording);
+    RunOptions options;
+    options.out_dir = out;
+    options.skip_frames = 160;
+    options.continue_map = true;
+    const RunSummary summary = runPipeline(source, config, options);
+    ASSERT_TRUE(summary.tracking.continued_map_found_at_frame.has_value());
+    EXPECT_LE(*summary.tracking.continued_map_found_at_frame, 165);
+    EXPECT_GT(summary.tracking.continued_map_keyframes, 10u);
+    ASSERT_TRUE(summary.ate.has_value());
+    EXPECT_LT(summary.ate->rmse_m, 0.01);
+  }
+  // Every surface the second session saw again grew a patch of the first: no new ids for
+  // them, and no duplicate against the ground truth's planes.
+  const std::set<int> ids = patchIds(out);
+  for (int id : first_ids) EXPECT_EQ(ids.count(id), 1u) << "patch " << id << " lost";
+  EXPECT_LE(ids.size(), first_ids.size() + 1);
+  const nlohmann::json figures =
+      eval::evaluateRun(out, fs::path(recording).replace_extension(".gt.json"));
+  EXPECT_EQ(figures["duplicate_patches"], 0);
+  EXPECT_GE(figures["plane_recall"].get<double>(), 0.8);
+  EXPECT_GE(figures["plane_precision"].get<double>(), 0.99);
+  EXPECT_EQ(readJson(out / "map/session.json")["sessions"], 2);
+}
+
+// The state of every file in `dir` (name, size, write time), to show nothing changed.
+std::map<std::string, std::pair<std::uintmax_t, fs::file_time_type>> filesOf(const fs::path& dir) {
+  std::map<std::string, std::pair<std::uintmax_t, fs::file_time_type>> files;
+  for (const auto& entry : fs::recursive_directory_iterator(dir)) {
+    if (entry.is_regular_file()) {
+      files[entry.path().string()] = {entry.file_size(), entry.last_write_time()};
+    }
+  }
+  return files;
+}
+
+std::string continueError(const fs::path& out) {
+  const fs::path recording = test::sourceDir() / "recordings/office.oni";
+  drivers::oni::OniSource source(recording);
+  RunOptions options;
+  options.out_dir = out;
+  options.max_frames = 5;
+  options.continue_map = true;
+  try {
+    runPipeline(source, loadRunConfig(std::nullopt), options);
+  } catch (const core::Error& e) {
+    return e.what();
+  }
+  return "";
+}
+
+// A missing, cut or newer map is refused with one message naming the file, before anything
+// in the folder is written.
+TEST(ContinueMap, AMissingCorruptOrNewerMapIsRefusedAndNothingIsOverwritten) {
+  const fs::path recording = test::sourceDir() / "recordings/office.oni";
+  if (!fs::is_regular_file(recording)) {
+    GTEST_SKIP() << recording << " is not rendered (TESSERA_RENDER_DEFAULT_RECORDING=ON)";
+  }
+  const fs::path out = test::freshTempDir();
+  {
+    drivers::oni::OniSource source(recording);
+    RunOptions options;
+    options.out_dir = out;
+    options.max_frames = 40;
+    options.save_map = false;
+    runPipeline(source, loadRunConfig(std::nullopt), options);
+  }
+  ASSERT_FALSE(fs::exists(out / "map"));
+  EXPECT_NE(continueError(out).find("no saved map to continue"), std::string::npos);
+  {
+    drivers::oni::OniSource source(recording);
+    RunOptions options;
+    options.out_dir = out;
+    options.max_frames = 40;
+    runPipeline(source, loadRunConfig(std::nullopt), options);
+  }
+  ASSERT_TRUE(fs::is_regular_file(out / "map/patch_map.bin"));
+
+  // Cut short.
+  const fs::path patch_map = out / "map/patch_map.bin";
+  fs::resize_file(patch_map, fs::file_size(patch_map) / 2);
+  auto before = filesOf(out);
+  std::string error = continueError(out);
+  EXPECT_NE(error.find("patch_map.bin: corrupt"), std::string::npos) << error;
+  EXPECT_EQ(filesOf(out), before);
+
+  // Written by a newer tessera.
+  fs::resize_file(patch_map, 0);
+  {
+    std::ofstream file(out / "map/session.json");
+    file << R"({"format": 99, "sessions": 1, "database": "x"})";
+  }
+  before = filesOf(out);
+  error = continueError(out);
+  EXPECT_NE(error.find("session.json: written by a newer tessera"), std::string::npos) << error;
+  EXPECT_EQ(filesOf(out), before);
+}
+
+}  // namespace
+}  // namespace tessera::pipeline
