@@ -188,7 +188,6 @@ struct Keyframe {
 // A keyframe as kept for relocalisation once its images are dropped.
 struct PastKeyframe {
   int id = -1;  // the keyframe's; its place in the index is its place in State::past
-  std::int64_t timestamp_ns = 0;
   core::Isometry T_W_C = core::Isometry::Identity();
   FeatureFrame features;
 };
@@ -245,22 +244,12 @@ void Tracker::sourceInterrupted() {
   state_->last_motion.reset();
 }
 
-std::vector<MapKeyframe> Tracker::mapKeyframes() const {
-  std::vector<MapKeyframe> out;
-  out.reserve(state_->past.size());
-  for (const PastKeyframe& past : state_->past) {
-    out.push_back({past.timestamp_ns, past.T_W_C, past.features});
-  }
-  return out;
-}
-
 void Tracker::continueMap(const std::vector<MapKeyframe>& keyframes) {
   State& s = *state_;
   if (s.reference) throw core::Error("Tracker::continueMap: call it before the first frame");
   for (const MapKeyframe& keyframe : keyframes) {
     s.places.add(static_cast<int>(s.past.size()), keyframe.features.descriptors);
-    s.past.push_back(
-        {s.keyframes_made++, keyframe.timestamp_ns, keyframe.T_W_C, keyframe.features});
+    s.past.push_back({s.keyframes_made++, keyframe.T_W_C, keyframe.features});
   }
   s.awaiting_map = !s.past.empty();
 }
@@ -322,9 +311,10 @@ TrackingResult Tracker::track(const core::Frame& frame, const core::Isometry& in
     keyframe->images = images;
     keyframe->T_W_C = T_W_C;
     keyframe->features = describeFeatures(images.grey, images.depth_m, k, config_.features);
-    if (config_.relocalise_against_all_keyframes && !coveredByPast(T_W_C)) {
+    const bool relocalisation = config_.relocalise_against_all_keyframes && !coveredByPast(T_W_C);
+    if (relocalisation) {
       s.places.add(static_cast<int>(s.past.size()), keyframe->features.descriptors);
-      s.past.push_back({keyframe->id, timestamp_ns, T_W_C, keyframe->features});
+      s.past.push_back({keyframe->id, T_W_C, keyframe->features});
     }
     auto record = std::make_shared<KeyframeRecord>();
     record->timestamp_ns = timestamp_ns;
@@ -333,6 +323,7 @@ TrackingResult Tracker::track(const core::Frame& frame, const core::Isometry& in
     record->depth_m = images.depth_m;
     record->intrinsics = k;
     record->starts_segment = starts_segment;
+    record->relocalisation = relocalisation;
     result.new_keyframes.push_back(std::move(record));
     s.keyframes.push_back(keyframe);
     while (static_cast<int>(s.keyframes.size()) > std::max(1, config_.relocalisation_keyframes)) {

@@ -17,6 +17,7 @@ void BitmapFiles::keep(std::optional<texture::PatchBitmap> built) {
   };
   if (const auto it = written_.find(bitmap.id); it != written_.end()) {
     bitmap_bytes_ -= bytesOf(it->second.width, it->second.height);
+    const std::lock_guard lock(written_mutex_);
     written_.erase(it);
   }
   if (const auto it = unwritten_.find(bitmap.id); it != unwritten_.end()) {
@@ -25,7 +26,9 @@ void BitmapFiles::keep(std::optional<texture::PatchBitmap> built) {
   }
   bitmap_bytes_ += bytesOf(bitmap.grid.width, bitmap.grid.height);
   try {
-    written_.emplace(bitmap.id, texture::writeBitmapFiles(bitmap, out_dir_));
+    planes::TextureBinding binding = texture::writeBitmapFiles(bitmap, out_dir_);
+    const std::lock_guard lock(written_mutex_);
+    written_.emplace(bitmap.id, std::move(binding));
   } catch (const core::Error& e) {  // kept, and tried again at the end
     spdlog::error("patch {} version {}: {}; its bitmap stays in memory", bitmap.id, bitmap.version,
                   e.what());
@@ -34,6 +37,7 @@ void BitmapFiles::keep(std::optional<texture::PatchBitmap> built) {
 }
 
 void BitmapFiles::adopt(const planes::TextureBindings& earlier) {
+  const std::lock_guard lock(written_mutex_);
   for (const auto& [id, binding] : earlier) {
     if (written_.emplace(id, binding).second) {
       bitmap_bytes_ += 3 * static_cast<std::size_t>(binding.width) * binding.height;
@@ -43,8 +47,15 @@ void BitmapFiles::adopt(const planes::TextureBindings& earlier) {
 
 void BitmapFiles::flush() {
   for (auto it = unwritten_.begin(); it != unwritten_.end(); it = unwritten_.erase(it)) {
-    written_.emplace(it->first, texture::writeBitmapFiles(it->second, out_dir_));
+    planes::TextureBinding binding = texture::writeBitmapFiles(it->second, out_dir_);
+    const std::lock_guard lock(written_mutex_);
+    written_.emplace(it->first, std::move(binding));
   }
+}
+
+planes::TextureBindings BitmapFiles::writtenNow() const {
+  const std::lock_guard lock(written_mutex_);
+  return written_;
 }
 
 }  // namespace tessera::pipeline

@@ -59,7 +59,7 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
                  earlier->keyframes.size(), earlier->patches.patches().size());
   }
   createOutputDir(options.out_dir);
-  internal::RunParts parts(source, config, options);
+  internal::RunParts parts(source, config, options, earlier ? &*earlier : nullptr);
   if (earlier) internal::continueMap(parts, *earlier);
   const auto start = std::chrono::steady_clock::now();
   const PipelineConfig& pipeline = config.pipeline;
@@ -76,9 +76,16 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
 
   RunSummary summary = internal::summariseRun(parts, options, wall_s);
   std::vector<std::filesystem::path> files = internal::exportRun(parts, options, summary);
-  if (options.save_map) {
+  if (earlier) {
     try {
-      internal::saveMap(parts, options.out_dir, earlier ? &*earlier : nullptr);
+      internal::prependEarlierTrajectory(options.out_dir, *earlier);
+    } catch (const core::Error& e) {
+      spdlog::error("the earlier sessions' poses are not in trajectory.txt: {}", e.what());
+    }
+  }
+  if (parts.map_saver) {
+    try {
+      parts.map_saver->save();
     } catch (const std::exception& e) {
       spdlog::error("the map was not saved for --continue ({}); the earlier saved map is kept",
                     e.what());

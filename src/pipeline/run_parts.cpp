@@ -39,7 +39,8 @@ std::unique_ptr<db::TextureStore> openStore(const RunOptions& options) {
 
 }  // namespace
 
-RunParts::RunParts(core::FrameSource& input, const RunConfig& config, const RunOptions& options)
+RunParts::RunParts(core::FrameSource& input, const RunConfig& config, const RunOptions& options,
+                   const SavedMap* earlier)
     : source(input),
       sample_dir(options.out_dir / "samples"),
       source_stage(input, options.max_frames, options.stop, options.skip_frames),
@@ -58,8 +59,14 @@ RunParts::RunParts(core::FrameSource& input, const RunConfig& config, const RunO
       catalog(*store, config.match),
       describe(config.textures, config.match, config.pattern, &catalog),
       commit(*store, catalog, {config.match, config.pattern, run_id}),
+      map_saver(options.save_map
+                    ? std::make_unique<MapSaver>(options.out_dir, store->location(), earlier,
+                                                 config.pipeline.checkpoint_every_s, planes,
+                                                 bitmaps, commit, loop_closer.get())
+                    : nullptr),
       stages(source_stage, tracking, integration, planes, describe, commit, bitmaps, sink,
-             loop_closer.get(), options.listener, config.pipeline.return_freed_memory_s) {
+             loop_closer.get(), options.listener, config.pipeline.return_freed_memory_s,
+             map_saver.get()) {
   planes.spillSamplesTo(sample_dir);
   if (loop_closer && config.tsdf.correct_after_loop_closure) {
     integration.keepFramesForCorrection(options.out_dir / "tsdf_frames");

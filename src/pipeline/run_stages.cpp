@@ -4,16 +4,29 @@
 
 #include <spdlog/spdlog.h>
 
+#include "internal/saved_map.h"
 #include "tessera/core/memory.h"
 
 namespace tessera::pipeline::internal {
 
 FusedFrame RunStages::closeLoops(FusedFrame fused) {
+  if (map_saver_ != nullptr) map_saver_->addKeyframes(fused.new_keyframes);
   if (loop_closer_ == nullptr) return fused;
   for (auto& keyframe : fused.new_keyframes) loop_closer_->add(std::move(keyframe));
   fused.new_keyframes.clear();
   fused.loop_correction = loop_closer_->correction();
   return fused;
+}
+
+FusedFrame RunStages::findPlanes(FusedFrame fused) {
+  FusedFrame out = planes_.process(std::move(fused));
+  if (map_saver_ != nullptr && !out.frame.source_interrupted) {
+    if (const auto pose = mapPoseOf(out)) {
+      map_saver_->addPose(out.frame.timestamp_ns, *pose);
+    }
+    map_saver_->checkpoint(static_cast<std::int64_t>(out.frame.index));
+  }
+  return out;
 }
 
 std::vector<planes::PatchEvent> RunStages::finishStream(

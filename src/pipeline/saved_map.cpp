@@ -11,7 +11,6 @@
 #include "tessera/core/error.h"
 #include "tessera/core/output_file.h"
 #include "tessera/fusion/map_keyframes.h"
-#include "tessera/texture/bitmap_export.h"
 
 namespace tessera::pipeline::internal {
 
@@ -135,6 +134,7 @@ SavedMap readSavedMap(const fs::path& run_dir, const planes::PatchMapConfig& con
     }
   }
   map.keyframes = fusion::readMapKeyframes(dir / "keyframes.bin");
+  map.trajectory = core::readTumTrajectory(dir / "trajectory.txt");
   map.patches = planes::PatchMap(config);
   map.patches.setSampleSpillDir(spill_dir);
   map.patches.loadState(dir / "patch_map.bin", dir / "samples");
@@ -142,52 +142,129 @@ SavedMap readSavedMap(const fs::path& run_dir, const planes::PatchMapConfig& con
 }
 
 void continueMap(RunParts& parts, SavedMap& earlier) {
-  parts.tracking.continueMap(earlier.keyframes);
-  parts.planes.continueMap(std::move(earlier.patches));
-  parts.bitmaps.adopt(earlier.bitmaps);
   std::map<int, std::size_t> texels;
   for (const auto& [id, binding] : earlier.bitmaps) {
     texels[id] = static_cast<std::size_t>(binding.width) * binding.height;
   }
+  std::vector<int> untextured;
+  for (const planes::Patch& patch : earlier.patches.patches()) {
+    const auto it = earlier.bitmaps.find(patch.id);
+    if (patch.finalized && (it == earlier.bitmaps.end() || it->second.version != patch.version)) {
+      untextured.push_back(patch.id);
+    }
+  }
+  for (int id : untextured) earlier.patches.textureAgain(id);
+  if (!untextured.empty()) {
+    spdlog::info("{} patches of the saved map had no texture yet; they are textured again",
+                 untextured.size());
+  }
+  parts.tracking.continueMap(earlier.keyframes);
+  parts.planes.continueMap(std::move(earlier.patches));
+  parts.bitmaps.adopt(earlier.bitmaps);
   parts.commit.adopt(earlier.instances, texels);
 }
 
-void saveMap(RunParts& parts, const fs::path& run_dir, const SavedMap* earlier) {
+void prependEarlierTrajectory(const fs::path& run_dir, const SavedMap& earlier) {
+  for (const char* name : {"trajectory.txt", "trajectory_closed.txt"}) {
+    const fs::path path = run_dir / name;
+    if (!fs::is_regular_file(path)) continue;
+    core::Trajectory trajectory = core::readTumTrajectory(path);
+    trajectory.insert(earlier.trajectory.begin(), earlier.trajectory.end());
+    core::writeTumTrajectory(trajectory, path);
+  }
+}
+
+MapSaver::MapSaver(fs::path run_dir, std::string database, const SavedMap* earlier,
+                   double checkpoint_every_s, const PlaneStage& planes, const BitmapFiles& bitmaps,
+                   const CommitStage& commit, const loop::LoopCloser* loop_closer)
+    : planes_(planes),
+      bitmaps_(bitmaps),
+      commit_(commit),
+      loop_closer_(loop_closer),
+      run_dir_(std::move(run_dir)),
+      database_(std::move(database)),
+      checkpoint_every_s_(checkpoint_every_s) {
+  if (earlier != nullptr) {
+    earlier_sessions_ = earlier->sessions;
+    keyframes_ = earlier->keyframes;
+    earlier_keyframes_ = keyframes_.size();
+    earlier_trajectory_ = earlier->trajectory;
+  }
+}
+
+void MapSaver::addKeyframes(
+    const std::vector<std::shared_ptr<const fusion::KeyframeRecord>>& keyframes) {
+  const std::lock_guard lock(keyframes_mutex_);
+  for (const auto& keyframe : keyframes) {
+    if (keyframe->relocalisation) {
+      keyframes_.push_back({keyframe->timestamp_ns, keyframe->T_W_C, keyframe->features});
+    }
+  }
+}
+
+void MapSaver::checkpoint(std::int64_t frame_index) {
+  last_frame_ = frame_index;
+  if (checkpoint_every_s_ <= 0.0 ||
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - last_save_).count() <
+          checkpoint_every_s_) {
+    return;
+  }
+  try {
+    write();
+    ++checkpoints_;
+  } catch (const std::exception& e) {
+    spdlog::error("map checkpoint not written ({}); the earlier saved map is kept", e.what());
+  }
+  last_save_ = std::chrono::steady_clock::now();
+}
+
+void MapSaver::write() {
   const auto start = std::chrono::steady_clock::now();
-  const fs::path dir = run_dir / "map";
-  const fs::path saving = run_dir / "map.saving";
-  const fs::path old = run_dir / "map.old";
+  const fs::path dir = run_dir_ / "map";
+  const fs::path saving = run_dir_ / "map.saving";
+  const fs::path old = run_dir_ / "map.old";
   std::error_code ignored;
   fs::remove_all(saving, ignored);
   fs::create_directories(saving);
 
-  const planes::PatchMap& patches = parts.planes.map();
+  const planes::PatchMap& patches = planes_.map();
   patches.saveState(saving / "patch_map.bin", saving / "samples");
-  // Keyframes at their corrected poses; those of the earlier sessions as they were saved
-  // (this session's pose graph does not hold them).
-  std::vector<fusion::MapKeyframe> keyframes = parts.tracking.mapKeyframes();
-  const std::size_t earlier_count = earlier != nullptr ? earlier->keyframes.size() : 0;
-  if (keyframes.empty() && earlier != nullptr)
-    keyframes = earlier->keyframes;  // ground-truth poses
-  if (parts.loop_closer && parts.loop_closer->graph().stats().optimisations > 0) {
-    const loop::MapCorrection correction = parts.loop_closer->graph().correction();
-    for (std::size_t i = earlier_count; i < keyframes.size(); ++i) {
-      keyframes[i].T_W_C = correction.at(keyframes[i].timestamp_ns) * keyframes[i].T_W_C;
+  // This session's keyframes at their corrected poses.
+  std::vector<fusion::MapKeyframe> keyframes;
+  {
+    const std::lock_guard lock(keyframes_mutex_);
+    keyframes = keyframes_;
+  }
+  if (loop_closer_ != nullptr) {
+    if (const auto correction = loop_closer_->correction()) {
+      for (std::size_t i = earlier_keyframes_; i < keyframes.size(); ++i) {
+        keyframes[i].T_W_C = correction->at(keyframes[i].timestamp_ns) * keyframes[i].T_W_C;
+      }
     }
   }
   fusion::writeMapKeyframes(saving / "keyframes.bin", keyframes);
+  core::Trajectory trajectory = trajectory_;
+  if (loop_closer_ != nullptr) {
+    if (const auto correction = loop_closer_->correction()) {
+      for (auto& [t, pose] : trajectory) pose = correction->at(t) * pose;
+    }
+  }
+  trajectory.insert(earlier_trajectory_.begin(), earlier_trajectory_.end());
+  core::writeTumTrajectory(trajectory, saving / "trajectory.txt");
 
+  // Each patch's bitmap and layers of its current version; a patch whose commit has not
+  // caught up has none, and a session that continues the map textures it again.
+  const planes::TextureBindings bitmaps = bitmaps_.writtenNow();
+  const auto instances = commit_.instancesNow();
   json list = json::array();
-  const planes::TextureBindings bitmaps =
-      texture::currentBindings(parts.bitmaps.written(), patches, run_dir);
   for (const planes::Patch& patch : patches.patches()) {
     json entry = {{"id", patch.id}, {"layers", json::array()}};
-    if (const auto it = bitmaps.find(patch.id); it != bitmaps.end()) {
+    if (const auto it = bitmaps.find(patch.id);
+        it != bitmaps.end() && it->second.version == patch.version) {
       entry["bitmap"] = bindingJson(it->second);
     }
-    if (const auto it = parts.commit.instances().find(patch.id);
-        it != parts.commit.instances().end() && !it->second.empty() &&
-        it->second.front().version == patch.version) {
+    if (const auto it = instances.find(patch.id); it != instances.end() && !it->second.empty() &&
+                                                  it->second.front().version == patch.version) {
       for (const db::TextureInstance& layer : it->second) {
         entry["layers"].push_back(instanceJson(layer));
       }
@@ -195,22 +272,23 @@ void saveMap(RunParts& parts, const fs::path& run_dir, const SavedMap* earlier) 
     list.push_back(std::move(entry));
   }
   writeJson({{"patches", std::move(list)}}, saving / "bitmaps.json");
-  const int sessions = (earlier != nullptr ? earlier->sessions : 0) + 1;
-  writeJson({{"format", kFormat},
-             {"sessions", sessions},
-             {"database", parts.store->location()},
-             {"keyframes", keyframes.size()},
-             {"planes", patches.planes().size()},
-             {"patches", patches.patches().size()}},
-            saving / "session.json");
+  json session = {{"format", kFormat},
+                  {"sessions", earlier_sessions_ + 1},
+                  {"database", database_},
+                  {"keyframes", keyframes.size()},
+                  {"planes", patches.planes().size()},
+                  {"patches", patches.patches().size()},
+                  {"last_frame", nullptr}};
+  if (last_frame_) session["last_frame"] = *last_frame_;
+  writeJson(session, saving / "session.json");
 
   // The new map in, the old one out: at each moment one whole map is there.
   fs::remove_all(old, ignored);
   if (fs::exists(dir)) fs::rename(dir, old);
   fs::rename(saving, dir);
   fs::remove_all(old, ignored);
-  spdlog::info("map saved for --continue in {} ({} keyframes, {} patches, session {}) in {:.1f} s",
-               dir.string(), keyframes.size(), patches.patches().size(), sessions,
+  spdlog::info("map saved for --continue in {} ({} keyframes, {} patches, session {}) in {:.2f} s",
+               dir.string(), keyframes.size(), patches.patches().size(), earlier_sessions_ + 1,
                std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
 }
 

@@ -185,9 +185,13 @@ CommitRecord CommitStage::process(DescribedPatch described) {
       instance.texture_id = ids.at(static_cast<std::size_t>(-instance.texture_id - 1));
     }
   }
-  std::vector<db::TextureInstance>& stored = instances_[bitmap.id];
-  const std::vector<std::int64_t> superseded = texturesLeft(stored, commit.instances);
-  stored = commit.instances;
+  std::vector<std::int64_t> superseded;
+  {
+    const std::lock_guard lock(instances_mutex_);
+    std::vector<db::TextureInstance>& stored = instances_[bitmap.id];
+    superseded = texturesLeft(stored, commit.instances);
+    stored = commit.instances;
+  }
   removeUnused(superseded);
   shown_[bitmap.id] = reuse::shownPatch(bitmap.grid.texels(), commit.instances,
                                         catalog_.loadLayers(commit.instances));
@@ -203,6 +207,7 @@ void CommitStage::adopt(const std::map<int, std::vector<db::TextureInstance>>& e
   for (const auto& [patch_id, layers] : earlier) {
     const auto size = texels.find(patch_id);
     if (layers.empty() || size == texels.end()) continue;
+    const std::lock_guard lock(instances_mutex_);
     instances_[patch_id] = layers;
     shown_[patch_id] = reuse::shownPatch(size->second, layers, catalog_.loadLayers(layers));
   }
@@ -224,7 +229,10 @@ void CommitStage::retire(int patch_id) {
     spdlog::error("patch {} (merged into another): its instances stay: {}", patch_id, e.what());
     ++figures_.commit_failures;
   }
-  instances_.erase(patch_id);
+  {
+    const std::lock_guard lock(instances_mutex_);
+    instances_.erase(patch_id);
+  }
   shown_.erase(patch_id);
   ++figures_.retirements;
 }

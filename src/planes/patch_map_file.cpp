@@ -1,6 +1,7 @@
 // A patch map saved for a later session to continue (`tessera run --continue`).
 #include <algorithm>
 #include <filesystem>
+#include <limits>
 #include <map>
 #include <string>
 #include <vector>
@@ -46,6 +47,15 @@ void writeCell(core::BinaryWriter& out, const Cell& cell) {
 Cell readCell(core::BinaryReader& in) {
   const int u = in.value<int>();
   return {u, in.value<int>()};
+}
+
+// A second name for a samples file, or a copy where links are not possible. A samples file
+// never changes once written: it is read back, removed, and written anew under a new inode.
+void linkOrCopy(const std::filesystem::path& from, const std::filesystem::path& to) {
+  std::error_code ec;
+  std::filesystem::remove(to, ec);
+  std::filesystem::create_hard_link(from, to, ec);
+  if (ec) std::filesystem::copy_file(from, to);
 }
 
 struct StoredCell {
@@ -112,8 +122,7 @@ void PatchMap::saveState(const std::filesystem::path& file,
     out.value(patch.finalized_area_m2);
     out.value(patch.frames_seen);
     if (patch.spilled_samples) {
-      std::filesystem::copy_file(*patch.spilled_samples, samplesFile(samples_dir, patch.id),
-                                 std::filesystem::copy_options::overwrite_existing);
+      linkOrCopy(*patch.spilled_samples, samplesFile(samples_dir, patch.id));
     } else {
       patch.samples.save(samplesFile(samples_dir, patch.id));
     }
@@ -204,8 +213,7 @@ void PatchMap::loadState(const std::filesystem::path& file,
     const std::filesystem::path samples = samplesFile(samples_dir, id);
     if (spill_dir_) {
       const std::filesystem::path spilled = samplesFile(*spill_dir_, id);
-      std::filesystem::copy_file(samples, spilled,
-                                 std::filesystem::copy_options::overwrite_existing);
+      linkOrCopy(samples, spilled);
       patch.spilled_samples = spilled;
     } else {
       patch.samples = ColourSamples::load(samples);
@@ -217,6 +225,14 @@ void PatchMap::loadState(const std::filesystem::path& file,
   next_plane_id_ = next_plane_id;
   seen_this_frame_.clear();
   pending_.clear();
+}
+
+void PatchMap::textureAgain(int id) {
+  Patch& patch = patchWithId(id);
+  if (!patch.finalized) return;
+  restoreSamples(patch);
+  patch.finalized = false;
+  patch.last_seen_frame = std::numeric_limits<long>::min() / 2;  // out of view since long ago
 }
 
 }  // namespace tessera::planes

@@ -121,11 +121,14 @@ TEST(ContinueMap, AMissingCorruptOrNewerMapIsRefusedAndNothingIsOverwritten) {
   ASSERT_FALSE(fs::exists(out / "map"));
   EXPECT_NE(continueError(out).find("no saved map to continue"), std::string::npos);
   {
+    // A checkpoint after every frame, while patches are committed beside it.
     drivers::oni::OniSource source(recording);
+    RunConfig config = loadRunConfig(std::nullopt);
+    config.pipeline.checkpoint_every_s = 1e-9;
     RunOptions options;
     options.out_dir = out;
     options.max_frames = 40;
-    runPipeline(source, loadRunConfig(std::nullopt), options);
+    runPipeline(source, config, options);
   }
   ASSERT_TRUE(fs::is_regular_file(out / "map/patch_map.bin"));
 

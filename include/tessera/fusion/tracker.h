@@ -76,6 +76,9 @@ struct KeyframeRecord {
   // Tracking restarted here after a loss, or was relocalised against an old keyframe: its pose
   // does not follow from the keyframe before by odometry.
   bool starts_segment = false;
+  // Kept among the keyframes relocalised against (relocalise_against_all_keyframes): a later
+  // session that continues the map relocalises against it too.
+  bool relocalisation = false;
 };
 
 struct TrackingResult {
@@ -109,9 +112,6 @@ class Tracker {
   // meanwhile, so the next frame is relocalised rather than tracked from the last pose.
   void sourceInterrupted();
 
-  // Every keyframe kept to relocalise against (relocalise_against_all_keyframes), oldest first,
-  // at its tracked pose.
-  std::vector<MapKeyframe> mapKeyframes() const;
   // Starts in an earlier session's map: its keyframes join those relocalised against, and the
   // first frames are relocalised against them rather than started at initial_T_W_C. Until one
   // is found they are lost; after lost_frames_before_restart of them the session starts in its

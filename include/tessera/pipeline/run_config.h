@@ -33,6 +33,10 @@ struct PipelineConfig {
   // a commit, off the frame path); 0: never. Frees on many threads leave free pages in many
   // arenas that glibc does not give back by itself.
   double return_freed_memory_s = 10.0;
+  // Seconds between checkpoints of OUT/map (the state `tessera run --continue` needs), written
+  // on the frame path after the plane stage; a run killed outright loses at most this much of
+  // its map. 0: the map is saved at the end only.
+  double checkpoint_every_s = 60.0;
 };
 
 void readConfig(const core::ConfigSection& section, PipelineConfig& config);

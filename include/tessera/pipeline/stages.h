@@ -10,6 +10,7 @@
 #include <functional>
 #include <map>
 #include <memory>
+#include <mutex>
 #include <optional>
 #include <string>
 
@@ -128,8 +129,6 @@ class TrackingStage {
   // An earlier session's keyframes (`tessera run --continue`): with tracked poses, the first
   // frames are relocalised against them (fusion::Tracker::continueMap).
   void continueMap(const std::vector<fusion::MapKeyframe>& keyframes);
-  // The keyframes a later session relocalises against, at their tracked poses.
-  std::vector<fusion::MapKeyframe> mapKeyframes() const { return tracker_.mapKeyframes(); }
 
   const TrackingFigures& figures() const { return figures_; }
   const StageTimer& timer() const { return timer_; }
@@ -267,6 +266,8 @@ class BitmapFiles {
   const planes::TextureBindings& written() const { return written_; }
   // The bitmaps of an earlier session whose map this run continues (their files are there).
   void adopt(const planes::TextureBindings& earlier);
+  // A copy of written(), safe while another thread keeps bitmaps (a checkpoint of the map).
+  planes::TextureBindings writtenNow() const;
   // Build time of each bitmap, and their total area (m^2 of observed texels).
   const StageTimer& timer() const { return timer_; }
   double areaBuiltM2() const { return area_built_m2_; }
@@ -275,6 +276,7 @@ class BitmapFiles {
 
  private:
   std::filesystem::path out_dir_;
+  mutable std::mutex written_mutex_;  // written_ changes on the committing thread
   planes::TextureBindings written_;
   std::map<int, texture::PatchBitmap> unwritten_;  // newest versions whose files failed
   std::atomic<std::size_t> bitmap_bytes_{0};

@@ -10,6 +10,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <map>
+#include <mutex>
 #include <optional>
 #include <string>
 #include <vector>
@@ -130,6 +131,11 @@ class CommitStage {
 
   // The newest committed instances of each patch id (its layers, 0 first).
   const std::map<int, std::vector<db::TextureInstance>>& instances() const { return instances_; }
+  // A copy of instances(), safe while the committing thread commits (a checkpoint of the map).
+  std::map<int, std::vector<db::TextureInstance>> instancesNow() const {
+    const std::lock_guard lock(instances_mutex_);
+    return instances_;
+  }
   const CommitFigures& figures() const { return figures_; }
   // The map's texture economy now, over the newest bitmap of each patch committed or not (as
   // report.json's, computed at export from the files the map shows).
@@ -143,6 +149,7 @@ class CommitStage {
   db::TextureStore& store_;
   reuse::StoreCatalog& catalog_;
   reuse::CommitRules rules_;
+  mutable std::mutex instances_mutex_;  // instances_ changes on the committing thread
   std::map<int, std::vector<db::TextureInstance>> instances_;
   std::map<int, reuse::ShownPatch> shown_;  // each patch as the map shows it now
   CommitFigures figures_;

@@ -269,6 +269,9 @@ class PatchMap {
   // Throws core::Error naming a missing, corrupt or newer file, or one saved with other cell
   // sizes; the map is unchanged then.
   void loadState(const std::filesystem::path& file, const std::filesystem::path& samples_dir);
+  // A loaded patch whose texture was not saved (a checkpoint taken before its commit) is
+  // finalized again as soon as it is out of view, from its samples.
+  void textureAgain(int id);
 
   const Patch* find(int id) const;
   // A copy of patch `id` for texturing (its outline traced, its samples listed).

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "internal/run_stages.h"
+#include "internal/saved_map.h"
 #include "tessera/db/texture_store.h"
 #include "tessera/pipeline/run.h"
 #include "tessera/reuse/store_catalog.h"
@@ -16,7 +17,9 @@ namespace tessera::pipeline::internal {
 
 // Members are built in the order they are declared, each from those above it.
 struct RunParts {
-  RunParts(core::FrameSource& input, const RunConfig& config, const RunOptions& options);
+  // `earlier`: the saved map the run continues, if any (options.continue_map).
+  RunParts(core::FrameSource& input, const RunConfig& config, const RunOptions& options,
+           const SavedMap* earlier = nullptr);
   RunParts(const RunParts&) = delete;
   RunParts& operator=(const RunParts&) = delete;
 
@@ -37,6 +40,7 @@ struct RunParts {
   reuse::StoreCatalog catalog;
   DescribeStage describe;
   CommitStage commit;
+  std::unique_ptr<MapSaver> map_saver;  // null unless options.save_map
   RunStages stages;  // the graph's view of the stages above
 };
 

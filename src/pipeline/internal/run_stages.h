@@ -11,12 +11,15 @@
 
 namespace tessera::pipeline::internal {
 
+class MapSaver;
+
 class RunStages : public FramePath, public PatchPath, public RunReport {
  public:
   RunStages(SourceStage& source, TrackingStage& tracking, IntegrationStage& integration,
             PlaneStage& planes, const DescribeStage& describe, CommitStage& commit,
             BitmapFiles& bitmaps, StatsSink& sink, loop::LoopCloser* loop_closer,
-            RunListener* listener, double return_freed_memory_s = 0.0)
+            RunListener* listener, double return_freed_memory_s = 0.0,
+            MapSaver* map_saver = nullptr)
       : source_(source),
         tracking_(tracking),
         integration_(integration),
@@ -27,7 +30,8 @@ class RunStages : public FramePath, public PatchPath, public RunReport {
         sink_(sink),
         loop_closer_(loop_closer),
         listener_(listener),
-        return_freed_memory_s_(return_freed_memory_s) {}
+        return_freed_memory_s_(return_freed_memory_s),
+        map_saver_(map_saver) {}
 
   std::optional<core::Frame> next() override { return source_.next(); }
   TrackedFrame track(core::Frame frame) override { return tracking_.process(std::move(frame)); }
@@ -35,7 +39,8 @@ class RunStages : public FramePath, public PatchPath, public RunReport {
     return integration_.process(std::move(tracked));
   }
   FusedFrame closeLoops(FusedFrame fused) override;
-  FusedFrame findPlanes(FusedFrame fused) override { return planes_.process(std::move(fused)); }
+  // Also the map's checkpoint, while the plane stage holds still.
+  FusedFrame findPlanes(FusedFrame fused) override;
   // Waits for loop closure's last optimisation, so that the map follows it, then finishes.
   std::vector<planes::PatchEvent> finishStream(
       std::vector<planes::PatchSnapshot>& finalized) override;
@@ -70,6 +75,7 @@ class RunStages : public FramePath, public PatchPath, public RunReport {
   // PipelineConfig::return_freed_memory_s; when memory was last returned (after a commit).
   double return_freed_memory_s_;
   SteadyTime freed_memory_returned_at_ = std::chrono::steady_clock::now();
+  MapSaver* map_saver_;  // null when the run saves no map
 };
 
 }  // namespace tessera::pipeline::internal
