@@ -8,6 +8,8 @@
 
 #include "internal/run_parts.h"
 #include "tessera/core/error.h"
+#include "tessera/fusion/mesh_colours.h"
+#include "tessera/fusion/surface_merge.h"
 #include "tessera/map_export/map_files.h"
 #include "tessera/map_export/patch_files.h"
 #include "tessera/texture/bitmap_export.h"
@@ -102,7 +104,17 @@ std::vector<std::filesystem::path> exportRun(RunParts& parts, const RunOptions& 
   std::vector<std::filesystem::path> written;
   const auto file = [&](const char* name) { return written.emplace_back(options.out_dir / name); };
   // The mesh is written even when the source ended abnormally, so work is kept.
-  const auto mesh = finalMesh(parts, summary.loops);
+  fusion::SurfaceMesh mesh = finalMesh(parts, summary.loops);
+  const std::filesystem::path earlier_mesh = options.out_dir / "map" / "mesh.ply";
+  if (options.continue_map && std::filesystem::is_regular_file(earlier_mesh)) {
+    try {
+      // Two voxels: within them the sessions' surfaces are one surface.
+      mesh = fusion::mergeSurfaces(fusion::readPly(earlier_mesh), mesh,
+                                   2.0 * parts.integration.map().config().voxel_size_m);
+    } catch (const core::Error& e) {
+      spdlog::error("mesh.ply holds this session's surface only: {}", e.what());
+    }
+  }
   summary.exported.mesh_vertices = mesh.vertices.size();
   fusion::writePly(mesh, file("mesh.ply"));
   const planes::PatchMap& patches = parts.planes.map();

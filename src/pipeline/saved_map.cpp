@@ -185,6 +185,7 @@ MapSaver::MapSaver(fs::path run_dir, std::string database, const SavedMap* earli
       database_(std::move(database)),
       checkpoint_every_s_(checkpoint_every_s) {
   if (earlier != nullptr) {
+    continued_ = true;
     earlier_sessions_ = earlier->sessions;
     keyframes_ = earlier->keyframes;
     earlier_keyframes_ = keyframes_.size();
@@ -210,7 +211,7 @@ void MapSaver::checkpoint(std::int64_t frame_index) {
     return;
   }
   try {
-    write();
+    write(false);
     ++checkpoints_;
   } catch (const std::exception& e) {
     spdlog::error("map checkpoint not written ({}); the earlier saved map is kept", e.what());
@@ -218,7 +219,7 @@ void MapSaver::checkpoint(std::int64_t frame_index) {
   last_save_ = std::chrono::steady_clock::now();
 }
 
-void MapSaver::write() {
+void MapSaver::write(bool final) {
   const auto start = std::chrono::steady_clock::now();
   const fs::path dir = run_dir_ / "map";
   const fs::path saving = run_dir_ / "map.saving";
@@ -281,6 +282,16 @@ void MapSaver::write() {
                   {"last_frame", nullptr}};
   if (last_frame_) session["last_frame"] = *last_frame_;
   writeJson(session, saving / "session.json");
+  // The TSDF's surface: a copy of the run's exported mesh at the end (OUT/mesh.ply is written
+  // again by the next run); a checkpoint of a continued map carries the earlier sessions' (the
+  // TSDF of a session cut short is lost). Files in the map never change once written, so a
+  // second name for one is enough.
+  if (final && fs::is_regular_file(run_dir_ / "mesh.ply")) {
+    fs::copy_file(run_dir_ / "mesh.ply", saving / "mesh.ply");
+  } else if (!final && continued_ && fs::is_regular_file(dir / "mesh.ply")) {
+    fs::create_hard_link(dir / "mesh.ply", saving / "mesh.ply", ignored);
+    if (ignored) fs::copy_file(dir / "mesh.ply", saving / "mesh.ply");
+  }
 
   // The new map in, the old one out: at each moment one whole map is there.
   fs::remove_all(old, ignored);

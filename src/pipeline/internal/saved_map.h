@@ -73,12 +73,13 @@ class MapSaver {
   // plane stage). A save that fails is logged; the earlier map is kept.
   void checkpoint(std::int64_t frame_index);
   // The end of the run; throws core::Error naming a file that cannot be written.
-  void save() { write(); }
+  void save() { write(true); }
 
   std::size_t checkpoints() const { return checkpoints_; }
 
  private:
-  void write();
+  // final: the end of the run (OUT/mesh.ply is written), not a checkpoint.
+  void write(bool final);
 
   const PlaneStage& planes_;
   const BitmapFiles& bitmaps_;
@@ -87,6 +88,7 @@ class MapSaver {
 
   std::filesystem::path run_dir_;
   std::string database_;
+  bool continued_ = false;  // the run continues an earlier map
   int earlier_sessions_ = 0;
   double checkpoint_every_s_;
   std::chrono::steady_clock::time_point last_save_ = std::chrono::steady_clock::now();
