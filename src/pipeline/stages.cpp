@@ -122,7 +122,9 @@ std::optional<core::Isometry> TrackingStage::poseOf(
                    frame.index);
       return tracked.T_W_C;
     }
-    spdlog::warn("frame {}: {}", frame.index, tracked.problem);
+    spdlog::warn("frame {}: {}; the saved map's patches are set aside", frame.index,
+                 tracked.problem);
+    own_frame_ = true;
   }
   if (tracked.from_features) ++figures_.feature_poses;
   if (tracked.status == fusion::TrackingStatus::kRelocalised) {
@@ -151,6 +153,8 @@ TrackedFrame TrackingStage::process(core::Frame frame) {
     try {
       if (frame.colour_camera) frame = core::withRegisteredColour(std::move(frame));
       tracked.T_W_C = poseOf(frame, tracked.skip_reason, tracked.new_keyframes);
+      tracked.own_frame = own_frame_ && tracked.T_W_C.has_value();
+      if (tracked.own_frame) own_frame_ = false;
       tracked.keyframe_ns = keyframe_ns_;
     } catch (const core::Error& e) {
       tracked.T_W_C.reset();
@@ -187,6 +191,7 @@ FusedFrame IntegrationStage::process(TrackedFrame tracked) {
   fused.T_W_C = tracked.T_W_C;
   fused.keyframe_ns = tracked.keyframe_ns;
   fused.new_keyframes = std::move(tracked.new_keyframes);
+  fused.own_frame = tracked.own_frame;
   fused.skip_reason = std::move(tracked.skip_reason);
   fused.figures = tracked.figures;
   if (tracked.frame.source_interrupted) {
@@ -316,6 +321,10 @@ void PlaneStage::count(const std::vector<planes::PatchEvent>& events) {
 }
 
 FusedFrame PlaneStage::process(FusedFrame fused) {
+  if (fused.own_frame) {
+    spdlog::warn("{} planes of the saved map set aside: this session's regions do not join them",
+                 map_.setAsideAll());
+  }
   if (fused.frame.source_interrupted) {
     // What was seen before the interruption is kept even if the device never comes back.
     fused.patch_events = finish(fused.finalized_patches);

@@ -60,7 +60,7 @@ std::optional<std::pair<int, int>> PatchMap::findCoinciding() const {
   // Newest plane first, into the oldest it continues.
   for (auto newer = planes_.rbegin(); newer != planes_.rend(); ++newer) {
     const int from_id = newer->first;
-    if (newer->second.moments.count < 3.0) continue;
+    if (newer->second.moments.count < 3.0 || set_aside_.count(from_id) > 0) continue;
     const PlaneFit fit = fitPlane(newer->second.moments);
     std::vector<Eigen::Vector3d> centres;
     for (const auto& [key, id] : newer->second.tiles) {
@@ -69,7 +69,7 @@ std::optional<std::pair<int, int>> PatchMap::findCoinciding() const {
     }
     for (const auto& [into_id, older] : planes_) {
       if (into_id >= from_id) break;
-      if (older.moments.count < 3.0) continue;
+      if (older.moments.count < 3.0 || set_aside_.count(into_id) > 0) continue;
       // The allowance for a bent plane grows with the distance from where the older plane's
       // fit is anchored (its centroid).
       const double bend_m = std::tan(config_.merge_bend_deg * M_PI / 180.0) *

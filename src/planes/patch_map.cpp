@@ -211,7 +211,10 @@ std::vector<int> PatchMap::add(const std::vector<PlaneObservation>& observations
     // The planes the region continues, oldest first (one touching tile each is enough).
     std::vector<int> planes;
     for (const auto& [id, patch] : patches_) {
-      if (std::find(planes.begin(), planes.end(), patch.plane) != planes.end()) continue;
+      if (std::find(planes.begin(), planes.end(), patch.plane) != planes.end() ||
+          set_aside_.count(patch.plane) > 0) {
+        continue;
+      }
       if (continues(patch, plane, observation.points_W)) planes.push_back(patch.plane);
     }
     if (planes.empty()) {

@@ -227,6 +227,11 @@ void PatchMap::loadState(const std::filesystem::path& file,
   pending_.clear();
 }
 
+std::size_t PatchMap::setAsideAll() {
+  for (const auto& [id, plane] : planes_) set_aside_.insert(id);
+  return planes_.size();
+}
+
 void PatchMap::textureAgain(int id) {
   Patch& patch = patchWithId(id);
   if (!patch.finalized) return;

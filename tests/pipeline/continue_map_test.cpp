@@ -152,5 +152,48 @@ TEST(ContinueMap, AMissingCorruptOrNewerMapIsRefusedAndNothingIsOverwritten) {
   EXPECT_EQ(filesOf(out), before);
 }
 
+// A session that is never found in the map it continues maps in its own frame: the earlier
+// patches stay as they were, not grown by regions placed in another frame. (Here the lookup is
+// made to fail, and the session starts at the recording's true pose, where its regions would
+// otherwise continue the earlier planes.)
+TEST(ContinueMap, ASessionNotFoundInTheMapLeavesItsPatchesAsTheyWere) {
+  const fs::path recording = test::sourceDir() / "recordings/office.oni";
+  if (!fs::is_regular_file(recording)) {
+    GTEST_SKIP() << recording << " is not rendered (TESSERA_RENDER_DEFAULT_RECORDING=ON)";
+  }
+  const fs::path out = test::freshTempDir();
+  RunConfig config = loadRunConfig(std::nullopt);
+  {
+    drivers::oni::OniSource source(recording);
+    RunOptions options;
+    options.out_dir = out;
+    options.max_frames = 100;
+    runPipeline(source, config, options);
+  }
+  const nlohmann::json before = readJson(out / "patches.json");
+  config.tracker.relocalisation_min_votes = 1'000'000;  // no keyframe is ever a candidate
+  {
+    drivers::oni::OniSource source(recording);
+    RunOptions options;
+    options.out_dir = out;
+    options.skip_frames = 100;
+    options.max_frames = 60;
+    options.continue_map = true;
+    const RunSummary summary = runPipeline(source, config, options);
+    EXPECT_FALSE(summary.tracking.continued_map_found_at_frame.has_value());
+  }
+  const nlohmann::json after = readJson(out / "patches.json");
+  std::map<int, nlohmann::json> now;
+  for (const auto& patch : after["patches"]) now[patch["id"].get<int>()] = patch;
+  ASSERT_FALSE(before["patches"].empty());
+  for (const auto& patch : before["patches"]) {
+    const int id = patch["id"].get<int>();
+    ASSERT_EQ(now.count(id), 1u) << "patch " << id;
+    EXPECT_EQ(now[id]["version"], patch["version"]) << "patch " << id;
+    EXPECT_EQ(now[id]["area_m2"], patch["area_m2"]) << "patch " << id;
+  }
+  EXPECT_GT(after["patches"].size(), before["patches"].size());  // the session's own
+}
+
 }  // namespace
 }  // namespace tessera::pipeline

@@ -87,6 +87,9 @@ struct TrackedFrame {
   std::optional<std::int64_t> keyframe_ns;
   // Keyframes the tracker made at this frame, on their way to loop closure.
   std::vector<std::shared_ptr<const fusion::KeyframeRecord>> new_keyframes;
+  // A continued map's first frames were not found in it: this session maps in its own frame,
+  // and the earlier patches are set aside (planes::PatchMap::setAsideAll).
+  bool own_frame = false;
 };
 
 // A frame after fusion, with what the sink reports about it.
@@ -94,6 +97,7 @@ struct FusedFrame {
   core::Frame frame;
   bool integrated = false;
   bool held_out = false;  // left out of fusion and texturing (run --holdout-every)
+  bool own_frame = false;  // as TrackedFrame's
   // Posed and searched for planes, but not integrated (tsdf.integrate_every_n_frames).
   bool between_integrations = false;
   std::optional<core::Isometry> T_W_C;  // the pose it was fused at
@@ -145,6 +149,7 @@ class TrackingStage {
   TrackingFigures figures_;
   std::optional<std::int64_t> keyframe_ns_;  // the newest keyframe's time
   bool awaiting_map_ = false;                // continuing a map; no frame posed in it yet
+  bool own_frame_ = false;                   // not found in it: the next posed frame says so
   StageTimer timer_;
 };
 

@@ -269,6 +269,10 @@ class PatchMap {
   // Throws core::Error naming a missing, corrupt or newer file, or one saved with other cell
   // sizes; the map is unchanged then.
   void loadState(const std::filesystem::path& file, const std::filesystem::path& samples_dir);
+  // Every plane so far is set aside: regions no longer continue it, nor does a plane merge
+  // with it (a continued map the session could not find itself in: its frame is another).
+  // Returns how many.
+  std::size_t setAsideAll();
   // A loaded patch whose texture was not saved (a checkpoint taken before its commit) is
   // finalized again as soon as it is out of view, from its samples.
   void textureAgain(int id);
@@ -317,6 +321,7 @@ class PatchMap {
   std::map<int, Patch> patches_;  // the tiles, by patch id
   std::map<int, Plane> planes_;   // by plane id
   std::set<int> seen_this_frame_;
+  std::set<int> set_aside_;          // plane ids (setAsideAll)
   std::vector<PatchEvent> pending_;  // retirements from merges, reported by endFrame
   Eigen::Vector3f last_gain_ = Eigen::Vector3f::Ones();
   int next_id_ = 0;  // of tiles (patches)
