@@ -62,6 +62,9 @@ std::vector<MapKeyframe> readMapKeyframes(const std::filesystem::path& path) {
       f.points_C.emplace_back(s.X, s.Y, s.Z);
     }
     const std::size_t rows = in.count(kMaxItems);
+    if (rows != 0 && rows != features.size()) {
+      in.corrupt(fmt::format("{} descriptors for {} keypoints", rows, features.size()));
+    }
     if (rows > 0) {
       f.descriptors.create(static_cast<int>(rows), kDescriptorBytes, CV_8U);
       in.bytes(f.descriptors.data, f.descriptors.total());
