@@ -17,4 +17,11 @@ void finishOutputFile(std::ofstream& out, const std::filesystem::path& path) {
   if (!out) throw Error(fmt::format("{}: could not be written (disk full?)", path.string()));
 }
 
+void linkOrCopy(const std::filesystem::path& from, const std::filesystem::path& to) {
+  std::error_code ec;
+  std::filesystem::remove(to, ec);
+  std::filesystem::create_hard_link(from, to, ec);
+  if (ec) std::filesystem::copy_file(from, to);
+}
+
 }  // namespace tessera::core

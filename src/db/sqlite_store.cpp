@@ -274,4 +274,11 @@ std::unique_ptr<TextureStore> openTextureStore(const std::string& location,
   return openSqliteStore(location, options);
 }
 
+std::string lastingLocation(const std::string& location) {
+  if (internal::isPostgresUrl(location)) return internal::redactedUrl(location);
+  std::error_code ec;
+  const std::filesystem::path absolute = std::filesystem::absolute(location, ec);
+  return ec ? location : absolute.lexically_normal().string();
+}
+
 }  // namespace tessera::db

@@ -12,6 +12,8 @@ constexpr char kTag[] = "tessera-keyframes";
 constexpr std::uint32_t kFormat = 1;
 constexpr std::size_t kMaxItems = 1U << 24U;  // far above any real map
 constexpr int kDescriptorBytes = 32;          // ORB
+// A keyframe without features: its time, its pose and two zero counts.
+constexpr std::size_t kKeyframeBytes = sizeof(std::int64_t) + 16 * sizeof(double) + 16;
 
 // A keypoint and its point in the camera, as stored.
 struct StoredFeature {
@@ -49,7 +51,7 @@ void writeMapKeyframes(const std::filesystem::path& path,
 
 std::vector<MapKeyframe> readMapKeyframes(const std::filesystem::path& path) {
   core::BinaryReader in(path, kTag, kFormat);
-  std::vector<MapKeyframe> keyframes(in.count(kMaxItems));
+  std::vector<MapKeyframe> keyframes(in.count(kMaxItems, kKeyframeBytes));
   for (MapKeyframe& keyframe : keyframes) {
     keyframe.timestamp_ns = in.value<std::int64_t>();
     Eigen::Matrix4d T;
@@ -61,7 +63,7 @@ std::vector<MapKeyframe> readMapKeyframes(const std::filesystem::path& path) {
       f.keypoints.emplace_back(s.x, s.y, s.size, s.angle, s.response, s.octave, s.class_id);
       f.points_C.emplace_back(s.X, s.Y, s.Z);
     }
-    const std::size_t rows = in.count(kMaxItems);
+    const std::size_t rows = in.count(kMaxItems, kDescriptorBytes);
     if (rows != 0 && rows != features.size()) {
       in.corrupt(fmt::format("{} descriptors for {} keypoints", rows, features.size()));
     }

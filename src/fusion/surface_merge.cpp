@@ -31,7 +31,13 @@ SurfaceMesh mergeSurfaces(const SurfaceMesh& earlier, const SurfaceMesh& later, 
     }
     return index;
   };
+  const auto inside = [&](int vertex) {
+    return vertex >= 0 && static_cast<std::size_t>(vertex) < earlier.vertices.size() &&
+           static_cast<std::size_t>(vertex) < earlier.colors.size();
+  };
   for (const Eigen::Vector3i& triangle : earlier.triangles) {
+    // A corrupt file's triangle that names no vertex is dropped, not followed.
+    if (!inside(triangle[0]) || !inside(triangle[1]) || !inside(triangle[2])) continue;
     if (covered[triangle[0]] || covered[triangle[1]] || covered[triangle[2]]) continue;
     merged.triangles.emplace_back(keep(triangle[0]), keep(triangle[1]), keep(triangle[2]));
   }

@@ -1,6 +1,8 @@
+#include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
 #include "tessera/core/error.h"
+#include "tessera/core/output_file.h"
 #include "tessera/pipeline/stages.h"
 #include "tessera/texture/bitmap_export.h"
 
@@ -53,9 +55,26 @@ void BitmapFiles::flush() {
   }
 }
 
-planes::TextureBindings BitmapFiles::writtenNow() const {
+planes::TextureBindings BitmapFiles::linkCurrentInto(const std::filesystem::path& dir,
+                                                     const std::map<int, int>& versions) const {
+  planes::TextureBindings linked;
+  std::filesystem::create_directories(dir / "textures");
+  // Under the lock: keep() drops a binding before it writes the files of the next version,
+  // so a binding found here names its own version's files.
   const std::lock_guard lock(written_mutex_);
-  return written_;
+  for (const auto& [id, binding] : written_) {
+    const auto version = versions.find(id);
+    if (version == versions.end() || version->second != binding.version) continue;
+    for (const std::string& file : {binding.image, binding.state_image}) {
+      try {
+        core::linkOrCopy(out_dir_ / file, dir / file);
+      } catch (const std::filesystem::filesystem_error& e) {
+        throw core::Error(fmt::format("{}: cannot be kept in the map: {}", file, e.what()));
+      }
+    }
+    linked.emplace(id, binding);
+  }
+  return linked;
 }
 
 }  // namespace tessera::pipeline

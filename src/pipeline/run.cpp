@@ -52,13 +52,19 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
   std::optional<internal::SavedMap> earlier;
   if (options.continue_map) {
     // Read whole before anything is written: a map that cannot be continued changes nothing.
-    earlier = internal::readSavedMap(options.out_dir, config.patches, options.out_dir / "samples");
+    earlier = internal::readSavedMap(options.out_dir, config.patches, options.out_dir / "samples",
+                                     options.db);
     if (!options.db) options.db = earlier->database;
     spdlog::info("continuing the map in {} (session {}): {} keyframes, {} patches",
                  (options.out_dir / "map").string(), earlier->sessions + 1,
                  earlier->keyframes.size(), earlier->patches.patches().size());
   }
   createOutputDir(options.out_dir);
+  if (!options.continue_map && (options.save_map || !options.db)) {
+    // A saved map from an earlier run here is not this run's: its database is replaced (no
+    // --db), or this run's map takes its place at the first checkpoint.
+    internal::removeSavedMap(options.out_dir);
+  }
   internal::RunParts parts(source, config, options, earlier ? &*earlier : nullptr);
   if (earlier) internal::continueMap(parts, *earlier);
   const auto start = std::chrono::steady_clock::now();

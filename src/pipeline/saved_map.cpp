@@ -1,5 +1,9 @@
 #include "internal/saved_map.h"
 
+#include <fcntl.h>  // AT_FDCWD
+#include <cstdio>   // renameat2
+
+#include <algorithm>
 #include <chrono>
 #include <fstream>
 
@@ -10,6 +14,7 @@
 #include "internal/run_parts.h"
 #include "tessera/core/error.h"
 #include "tessera/core/output_file.h"
+#include "tessera/db/texture_store.h"
 #include "tessera/fusion/map_keyframes.h"
 
 namespace tessera::pipeline::internal {
@@ -97,11 +102,32 @@ void writeJson(const json& j, const fs::path& path) {
   core::finishOutputFile(out, path);
 }
 
+// Puts the folder `saving` in the place of `dir`, with `dir`'s old content removed. Where the
+// file system can, the two trade places in one step; elsewhere `dir` is first renamed to `old`,
+// and a run killed between the two renames leaves `old` whole (readSavedMap reads it then).
+void swapIn(const fs::path& saving, const fs::path& dir, const fs::path& old) {
+  std::error_code ignored;
+  // A swap cut off between its renames: its map is the one to keep until the new one is in.
+  if (!fs::exists(dir) && fs::is_directory(old)) fs::rename(old, dir);
+  fs::remove_all(old, ignored);
+  if (fs::exists(dir) &&
+      renameat2(AT_FDCWD, saving.c_str(), AT_FDCWD, dir.c_str(), RENAME_EXCHANGE) == 0) {
+    fs::remove_all(saving, ignored);  // now the earlier map
+    return;
+  }
+  if (fs::exists(dir)) fs::rename(dir, old);
+  fs::rename(saving, dir);
+  fs::remove_all(old, ignored);
+}
+
 }  // namespace
 
 SavedMap readSavedMap(const fs::path& run_dir, const planes::PatchMapConfig& config,
-                      const fs::path& spill_dir) {
-  const fs::path dir = run_dir / "map";
+                      const fs::path& spill_dir, const std::optional<std::string>& database) {
+  fs::path dir = run_dir / "map";
+  // A run killed between the two renames of a swap left its earlier map as map.old.
+  const bool swap_cut_off = !fs::is_directory(dir) && fs::is_directory(run_dir / "map.old");
+  if (swap_cut_off) dir = run_dir / "map.old";
   if (!fs::is_directory(dir)) {
     throw core::Error(fmt::format(
         "{}: no saved map to continue (a run writes one in OUT/map when it ends)", dir.string()));
@@ -117,7 +143,7 @@ SavedMap readSavedMap(const fs::path& run_dir, const planes::PatchMapConfig& con
                       session_file.string(), format, kFormat));
     }
     map.sessions = session.at("sessions").get<int>();
-    map.database = session.at("database").get<std::string>();
+    map.database = db::lastingLocation(session.at("database").get<std::string>());
     const json bitmaps = readJson(dir / "bitmaps.json");
     for (const json& patch : bitmaps.at("patches")) {
       const int id = patch.at("id").get<int>();
@@ -127,10 +153,18 @@ SavedMap readSavedMap(const fs::path& run_dir, const planes::PatchMapConfig& con
   } catch (const json::exception& e) {
     throw core::Error(fmt::format("{}: corrupt ({})", dir.string(), e.what()));
   }
+  if (database && db::lastingLocation(*database) != map.database) {
+    throw core::Error(fmt::format(
+        "{}: the map was committed to the texture database {}, and --db names another ({}): "
+        "continue it without --db, or with its own",
+        session_file.string(), map.database, *database));
+  }
   for (const auto& [id, binding] : map.bitmaps) {
-    if (!fs::is_regular_file(run_dir / binding.image)) {
-      throw core::Error(fmt::format("{}: missing (the bitmap of patch {} in the saved map)",
-                                    (run_dir / binding.image).string(), id));
+    for (const std::string& file : {binding.image, binding.state_image}) {
+      if (!fs::is_regular_file(dir / file)) {
+        throw core::Error(fmt::format("{}: missing (the bitmap of patch {} in the saved map)",
+                                      (dir / file).string(), id));
+      }
     }
   }
   map.keyframes = fusion::readMapKeyframes(dir / "keyframes.bin");
@@ -138,7 +172,31 @@ SavedMap readSavedMap(const fs::path& run_dir, const planes::PatchMapConfig& con
   map.patches = planes::PatchMap(config);
   map.patches.setSampleSpillDir(spill_dir);
   map.patches.loadState(dir / "patch_map.bin", dir / "samples");
+  if (swap_cut_off) {  // read whole: it is the map again
+    spdlog::warn(
+        "{}: the run that saved the map was cut off while swapping it in; the earlier "
+        "map is continued",
+        dir.string());
+    fs::rename(dir, run_dir / "map");
+  }
+  map.folder = run_dir / "map";
   return map;
+}
+
+void removeSavedMap(const fs::path& run_dir) {
+  bool removed = false;
+  for (const char* name : {"map", "map.old", "map.saving"}) {
+    std::error_code ec;
+    removed = fs::remove_all(run_dir / name, ec) > 0 || removed;
+    if (ec) {
+      throw core::Error(fmt::format("{}: the saved map of an earlier run cannot be removed: {}",
+                                    (run_dir / name).string(), ec.message()));
+    }
+  }
+  if (removed) {
+    spdlog::info("{}: the map an earlier run saved here is removed (this run does not continue it)",
+                 (run_dir / "map").string());
+  }
 }
 
 void continueMap(RunParts& parts, SavedMap& earlier) {
@@ -146,22 +204,35 @@ void continueMap(RunParts& parts, SavedMap& earlier) {
   for (const auto& [id, binding] : earlier.bitmaps) {
     texels[id] = static_cast<std::size_t>(binding.width) * binding.height;
   }
-  std::vector<int> untextured;
+  // A patch textured again: finalized without a bitmap of its version in the map (a checkpoint
+  // before its commit), or whose textures the database no longer has (a checkpoint before a
+  // later version replaced them).
+  std::vector<int> untextured = parts.commit.adopt(earlier.instances, texels);
   for (const planes::Patch& patch : earlier.patches.patches()) {
     const auto it = earlier.bitmaps.find(patch.id);
     if (patch.finalized && (it == earlier.bitmaps.end() || it->second.version != patch.version)) {
       untextured.push_back(patch.id);
     }
   }
+  std::sort(untextured.begin(), untextured.end());
+  untextured.erase(std::unique(untextured.begin(), untextured.end()), untextured.end());
   for (int id : untextured) earlier.patches.textureAgain(id);
   if (!untextured.empty()) {
-    spdlog::info("{} patches of the saved map had no texture yet; they are textured again",
-                 untextured.size());
+    spdlog::info(
+        "{} patches of the saved map have no texture in it or in the database; they "
+        "are textured again",
+        untextured.size());
+  }
+  // The run's folder shows the map's bitmaps again (a killed run may have left newer ones).
+  for (const auto& [id, binding] : earlier.bitmaps) {
+    for (const std::string& file : {binding.image, binding.state_image}) {
+      fs::create_directories((parts.bitmaps.outDir() / file).parent_path());
+      core::linkOrCopy(earlier.folder / file, parts.bitmaps.outDir() / file);
+    }
   }
   parts.tracking.continueMap(earlier.keyframes);
   parts.planes.continueMap(std::move(earlier.patches));
   parts.bitmaps.adopt(earlier.bitmaps);
-  parts.commit.adopt(earlier.instances, texels);
 }
 
 void prependEarlierTrajectory(const fs::path& run_dir, const SavedMap& earlier) {
@@ -182,7 +253,7 @@ MapSaver::MapSaver(fs::path run_dir, std::string database, const SavedMap* earli
       commit_(commit),
       loop_closer_(loop_closer),
       run_dir_(std::move(run_dir)),
-      database_(std::move(database)),
+      database_(db::lastingLocation(database)),
       checkpoint_every_s_(checkpoint_every_s) {
   if (earlier != nullptr) {
     continued_ = true;
@@ -254,8 +325,11 @@ void MapSaver::write(bool final) {
   core::writeTumTrajectory(trajectory, saving / "trajectory.txt");
 
   // Each patch's bitmap and layers of its current version; a patch whose commit has not
-  // caught up has none, and a session that continues the map textures it again.
-  const planes::TextureBindings bitmaps = bitmaps_.writtenNow();
+  // caught up has none, and a session that continues the map textures it again. The map
+  // holds its own names for the bitmaps' files: the run's are replaced by newer versions.
+  std::map<int, int> versions;
+  for (const planes::Patch& patch : patches.patches()) versions[patch.id] = patch.version;
+  const planes::TextureBindings bitmaps = bitmaps_.linkCurrentInto(saving, versions);
   const auto instances = commit_.instancesNow();
   json list = json::array();
   for (const planes::Patch& patch : patches.patches()) {
@@ -294,10 +368,7 @@ void MapSaver::write(bool final) {
   }
 
   // The new map in, the old one out: at each moment one whole map is there.
-  fs::remove_all(old, ignored);
-  if (fs::exists(dir)) fs::rename(dir, old);
-  fs::rename(saving, dir);
-  fs::remove_all(old, ignored);
+  swapIn(saving, dir, old);
   spdlog::info("map saved for --continue in {} ({} keyframes, {} patches, session {}) in {:.2f} s",
                dir.string(), keyframes.size(), patches.patches().size(), earlier_sessions_ + 1,
                std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());

@@ -163,6 +163,7 @@ CommitRecord CommitStage::process(DescribedPatch described) {
   figures_.match.add(figures.match_ms + figures.pattern_ms);
 
   db::Commit& commit = plan.commit;
+  retireEarlierRuns(bitmap.id, commit);
   std::vector<std::int64_t> ids;
   const auto commit_start = std::chrono::steady_clock::now();
   try {
@@ -202,14 +203,30 @@ CommitRecord CommitStage::process(DescribedPatch described) {
   return record;
 }
 
-void CommitStage::adopt(const std::map<int, std::vector<db::TextureInstance>>& earlier,
-                        const std::map<int, std::size_t>& texels) {
+std::vector<int> CommitStage::adopt(const std::map<int, std::vector<db::TextureInstance>>& earlier,
+                                    const std::map<int, std::size_t>& texels) {
+  std::vector<int> missing;
   for (const auto& [patch_id, layers] : earlier) {
+    for (const db::TextureInstance& layer : layers) earlier_runs_[patch_id].insert(layer.run_id);
     const auto size = texels.find(patch_id);
     if (layers.empty() || size == texels.end()) continue;
+    const auto stored = catalog_.loadLayers(layers);
+    if (stored.empty()) {
+      missing.push_back(patch_id);
+      continue;
+    }
     const std::lock_guard lock(instances_mutex_);
     instances_[patch_id] = layers;
-    shown_[patch_id] = reuse::shownPatch(size->second, layers, catalog_.loadLayers(layers));
+    shown_[patch_id] = reuse::shownPatch(size->second, layers, stored);
+  }
+  return missing;
+}
+
+void CommitStage::retireEarlierRuns(int patch_id, db::Commit& commit) {
+  const auto runs = earlier_runs_.find(patch_id);
+  if (runs == earlier_runs_.end()) return;
+  for (const std::int64_t run : runs->second) {
+    if (run != rules_.run_id) commit.retired.push_back({run, patch_id});  // again: a no-op
   }
 }
 
@@ -217,6 +234,7 @@ void CommitStage::retire(int patch_id) {
   ScopedStageTime time(timer_);
   db::Commit commit;
   commit.retired.push_back({rules_.run_id, patch_id});
+  retireEarlierRuns(patch_id, commit);
   const auto commit_start = std::chrono::steady_clock::now();
   try {
     store_.commit(commit);

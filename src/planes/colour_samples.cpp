@@ -199,6 +199,9 @@ constexpr char kSamplesMagic[8] = {'t', 's', 's', 'm', 'p', 'l', 's', '2'};
 }  // namespace
 
 void ColourSamples::save(const std::filesystem::path& path) const {
+  // A new file, not the old one rewritten: a saved map may hold a second name for the old one.
+  std::error_code ignored;
+  if (std::filesystem::is_regular_file(path, ignored)) std::filesystem::remove(path, ignored);
   std::ofstream out(path, std::ios::binary);
   // Tiles in key order, so that the file (and a reload) does not depend on hash order.
   std::vector<std::int64_t> keys;

@@ -10,6 +10,7 @@
 
 #include "tessera/core/binary_file.h"
 #include "tessera/core/error.h"
+#include "tessera/core/output_file.h"
 #include "tessera/planes/patch_map.h"
 
 namespace tessera::planes {
@@ -20,6 +21,10 @@ constexpr char kTag[] = "tessera-patch-map";
 constexpr std::uint32_t kFormat = 1;
 // Far above any real map: a corrupt count is refused before it is allocated.
 constexpr std::size_t kMaxItems = 1U << 28U;
+// The fewest bytes a stored plane, tile and patch take (what a count is checked against).
+constexpr std::size_t kPlaneBytes = 4 + 18 * 8;
+constexpr std::size_t kTileBytes = 3 * 4;
+constexpr std::size_t kPatchBytes = 4 * 4 + 8;
 
 std::filesystem::path samplesFile(const std::filesystem::path& dir, int patch_id) {
   return dir / fmt::format("patch_{}.samples", patch_id);
@@ -47,15 +52,6 @@ void writeCell(core::BinaryWriter& out, const Cell& cell) {
 Cell readCell(core::BinaryReader& in) {
   const int u = in.value<int>();
   return {u, in.value<int>()};
-}
-
-// A second name for a samples file, or a copy where links are not possible. A samples file
-// never changes once written: it is read back, removed, and written anew under a new inode.
-void linkOrCopy(const std::filesystem::path& from, const std::filesystem::path& to) {
-  std::error_code ec;
-  std::filesystem::remove(to, ec);
-  std::filesystem::create_hard_link(from, to, ec);
-  if (ec) std::filesystem::copy_file(from, to);
 }
 
 struct StoredCell {
@@ -122,7 +118,7 @@ void PatchMap::saveState(const std::filesystem::path& file,
     out.value(patch.finalized_area_m2);
     out.value(patch.frames_seen);
     if (patch.spilled_samples) {
-      linkOrCopy(*patch.spilled_samples, samplesFile(samples_dir, patch.id));
+      core::linkOrCopy(*patch.spilled_samples, samplesFile(samples_dir, patch.id));
     } else {
       patch.samples.save(samplesFile(samples_dir, patch.id));
     }
@@ -145,7 +141,7 @@ void PatchMap::loadState(const std::filesystem::path& file,
   const int next_id = in.value<int>();
   const int next_plane_id = in.value<int>();
   std::map<int, Plane> planes;
-  for (std::size_t n = in.count(kMaxItems); n > 0; --n) {
+  for (std::size_t n = in.count(kMaxItems, kPlaneBytes); n > 0; --n) {
     Plane plane;
     plane.id = in.value<int>();
     PlaneGeometry& g = *plane.geometry;
@@ -166,7 +162,8 @@ void PatchMap::loadState(const std::filesystem::path& file,
     plane.lo = readCell(in);
     plane.hi = readCell(in);
     plane.has_cells = in.value<std::uint8_t>() != 0;
-    for (std::size_t t = in.count(kMaxItems); t > 0; --t) {
+    if (plane.grid.tile_cells <= 0) in.corrupt(fmt::format("plane {} has no tile size", plane.id));
+    for (std::size_t t = in.count(kMaxItems, kTileBytes); t > 0; --t) {
       const Cell key = readCell(in);
       plane.tiles[key] = in.value<int>();
     }
@@ -174,7 +171,7 @@ void PatchMap::loadState(const std::filesystem::path& file,
     if (!planes.emplace(id, std::move(plane)).second) in.corrupt("a plane id twice");
   }
   std::map<int, Patch> patches;
-  for (std::size_t n = in.count(kMaxItems); n > 0; --n) {
+  for (std::size_t n = in.count(kMaxItems, kPatchBytes); n > 0; --n) {
     Patch patch;
     patch.samples = ColourSamples(config_.sample_cell_m, config_.sample_views);
     patch.id = in.value<int>();
@@ -203,17 +200,29 @@ void PatchMap::loadState(const std::filesystem::path& file,
   }
   in.expectEnd();
   for (const auto& [id, plane] : planes) {
+    if (id >= next_plane_id) in.corrupt(fmt::format("plane {} not below the next id", id));
     for (const auto& [key, patch_id] : plane.tiles) {
-      if (patches.count(patch_id) == 0) in.corrupt(fmt::format("plane {} names no patch", id));
+      const auto patch = patches.find(patch_id);
+      if (patch == patches.end() || patch->second.plane != id || patch->second.tile != key) {
+        in.corrupt(fmt::format("plane {}'s tiles and its patches disagree", id));
+      }
+    }
+  }
+  for (const auto& [id, patch] : patches) {
+    if (id >= next_id) in.corrupt(fmt::format("patch {} not below the next id", id));
+    if (planes.at(patch.plane).tiles.count(patch.tile) == 0) {
+      in.corrupt(fmt::format("patch {} is no tile of its plane", id));
     }
   }
   // Only now is the map replaced: a file refused above leaves it as it was.
   if (spill_dir_) std::filesystem::create_directories(*spill_dir_);
   for (auto& [id, patch] : patches) {
     const std::filesystem::path samples = samplesFile(samples_dir, id);
-    if (spill_dir_) {
+    // A finalized patch's samples stay out of memory until it is seen again, as a spilled
+    // patch's do; a growing patch's are used as it grows or is finalized.
+    if (spill_dir_ && patch.finalized) {
       const std::filesystem::path spilled = samplesFile(*spill_dir_, id);
-      linkOrCopy(samples, spilled);
+      core::linkOrCopy(samples, spilled);
       patch.spilled_samples = spilled;
     } else {
       patch.samples = ColourSamples::load(samples);

@@ -10,15 +10,23 @@ namespace tessera::texture {
 
 namespace {
 
+// Written beside `path` and renamed over it: a reader never sees half a file, and a second
+// name for the old file (a saved map's) keeps the old pixels.
 void writePng(const std::filesystem::path& path, const cv::Mat& image) {
+  const std::filesystem::path writing =
+      path.parent_path() / (path.stem().string() + ".writing" + path.extension().string());
   bool written = false;
   try {
-    written = cv::imwrite(path.string(), image);
+    written = cv::imwrite(writing.string(), image);
   } catch (const cv::Exception& e) {
     throw core::Error(fmt::format("{}: could not be written: {}", path.string(), e.what()));
   }
-  if (!written)
+  std::error_code ec;
+  if (written) std::filesystem::rename(writing, path, ec);
+  if (!written || ec) {
+    std::filesystem::remove(writing, ec);
     throw core::Error(fmt::format("{}: could not be written (disk full?)", path.string()));
+  }
 }
 
 }  // namespace

@@ -1,9 +1,12 @@
 // `tessera run --continue`: a map saved at the end of one run and continued by the next.
+#include <cstdint>
 #include <fstream>
+#include <optional>
 #include <set>
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
 
 #include "support/test_data.h"
 #include "tessera/core/error.h"
@@ -87,13 +90,14 @@ std::map<std::string, std::pair<std::uintmax_t, fs::file_time_type>> filesOf(con
   return files;
 }
 
-std::string continueError(const fs::path& out) {
+std::string continueError(const fs::path& out, std::optional<std::string> db = std::nullopt) {
   const fs::path recording = test::sourceDir() / "recordings/office.oni";
   drivers::oni::OniSource source(recording);
   RunOptions options;
   options.out_dir = out;
   options.max_frames = 5;
   options.continue_map = true;
+  options.db = std::move(db);
   try {
     runPipeline(source, loadRunConfig(std::nullopt), options);
   } catch (const core::Error& e) {
@@ -131,12 +135,52 @@ TEST(ContinueMap, AMissingCorruptOrNewerMapIsRefusedAndNothingIsOverwritten) {
     runPipeline(source, config, options);
   }
   ASSERT_TRUE(fs::is_regular_file(out / "map/patch_map.bin"));
+  // The map holds its own bitmap files, each of its binding's size (checkpoints taken while
+  // newer versions were written).
+  const nlohmann::json bitmaps = readJson(out / "map/bitmaps.json");
+  int bound = 0;
+  for (const auto& patch : bitmaps["patches"]) {
+    if (!patch.contains("bitmap")) continue;
+    const auto& binding = patch["bitmap"];
+    const cv::Mat image = cv::imread((out / "map" / binding["image"].get<std::string>()).string(),
+                                     cv::IMREAD_UNCHANGED);
+    ASSERT_FALSE(image.empty()) << binding["image"];
+    EXPECT_EQ(image.cols, binding["width"].get<int>());
+    EXPECT_EQ(image.rows, binding["height"].get<int>());
+    ++bound;
+  }
+  EXPECT_GT(bound, 0);
+
+  // Another texture database than the map's.
+  auto before = filesOf(out);
+  std::string error = continueError(out, (out / "other.db").string());
+  EXPECT_NE(error.find("--db names another"), std::string::npos) << error;
+  EXPECT_EQ(filesOf(out), before);
+
+  // A count that does not fit in the file: refused before anything is allocated.
+  const fs::path keyframes = out / "map/keyframes.bin";
+  const fs::path keyframes_kept = out / "keyframes.bin.kept";
+  fs::rename(keyframes, keyframes_kept);
+  {
+    std::ofstream file(keyframes, std::ios::binary);
+    const std::uint32_t version = 1;
+    const std::uint64_t count = 1U << 20U;
+    file << "tessera-keyframes";
+    file.write(reinterpret_cast<const char*>(&version), sizeof version);
+    file.write(reinterpret_cast<const char*>(&count), sizeof count);
+  }
+  before = filesOf(out);
+  error = continueError(out);
+  EXPECT_NE(error.find("keyframes.bin: corrupt (a count of 1048576 items"), std::string::npos)
+      << error;
+  EXPECT_EQ(filesOf(out), before);
+  fs::rename(keyframes_kept, keyframes);
 
   // Cut short.
   const fs::path patch_map = out / "map/patch_map.bin";
   fs::resize_file(patch_map, fs::file_size(patch_map) / 2);
-  auto before = filesOf(out);
-  std::string error = continueError(out);
+  before = filesOf(out);
+  error = continueError(out);
   EXPECT_NE(error.find("patch_map.bin: corrupt"), std::string::npos) << error;
   EXPECT_EQ(filesOf(out), before);
 
@@ -150,6 +194,30 @@ TEST(ContinueMap, AMissingCorruptOrNewerMapIsRefusedAndNothingIsOverwritten) {
   error = continueError(out);
   EXPECT_NE(error.find("session.json: written by a newer tessera"), std::string::npos) << error;
   EXPECT_EQ(filesOf(out), before);
+}
+
+// A run killed between the two renames that swap a new map in leaves the earlier map as
+// map.old: it is continued, and is the map again.
+TEST(ContinueMap, ASwapCutOffBetweenItsRenamesContinuesTheEarlierMap) {
+  const fs::path recording = test::sourceDir() / "recordings/office.oni";
+  if (!fs::is_regular_file(recording)) {
+    GTEST_SKIP() << recording << " is not rendered (TESSERA_RENDER_DEFAULT_RECORDING=ON)";
+  }
+  const fs::path out = test::freshTempDir();
+  {
+    drivers::oni::OniSource source(recording);
+    RunOptions options;
+    options.out_dir = out;
+    options.max_frames = 40;
+    runPipeline(source, loadRunConfig(std::nullopt), options);
+  }
+  fs::rename(out / "map", out / "map.old");
+  fs::create_directories(out / "map.saving");  // the new one, written whole but not swapped in
+  EXPECT_EQ(continueError(out), "");
+  EXPECT_TRUE(fs::is_regular_file(out / "map/session.json"));
+  EXPECT_EQ(readJson(out / "map/session.json")["sessions"], 2);
+  EXPECT_FALSE(fs::exists(out / "map.old"));
+  EXPECT_FALSE(fs::exists(out / "map.saving"));
 }
 
 // A session that is never found in the map it continues maps in its own frame: the earlier

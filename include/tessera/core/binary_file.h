@@ -56,6 +56,9 @@ class BinaryReader {
   BinaryReader(std::filesystem::path path, const std::string& tag, std::uint32_t newest)
       : path_(std::move(path)), in_(path_, std::ios::binary) {
     if (!in_) throw Error(fmt::format("{}: cannot be opened", path_.string()));
+    std::error_code ec;
+    size_ = std::filesystem::file_size(path_, ec);
+    if (ec) throw Error(fmt::format("{}: cannot be read ({})", path_.string(), ec.message()));
     std::string found(tag.size(), '\0');
     bytes(found.data(), found.size());
     if (found != tag) throw Error(fmt::format("{}: not a {} file", path_.string(), tag));
@@ -73,16 +76,21 @@ class BinaryReader {
     bytes(&v, sizeof v);
     return v;
   }
-  // A count of at most `max` (a corrupt file does not make the reader allocate without bound).
-  std::size_t count(std::size_t max) {
+  // A count of at most `max` items of at least `item_bytes` each, that fit in what is left of
+  // the file: a corrupt count does not make the reader allocate without bound.
+  std::size_t count(std::size_t max, std::size_t item_bytes = 1) {
     const auto n = value<std::uint64_t>();
     if (n > max) corrupt(fmt::format("a count of {} (at most {} expected)", n, max));
+    if (n * item_bytes > bytesLeft()) {
+      corrupt(fmt::format("a count of {} items of {} bytes in the {} bytes left", n, item_bytes,
+                          bytesLeft()));
+    }
     return static_cast<std::size_t>(n);
   }
   template <typename T>
   std::vector<T> values(std::size_t max) {
     static_assert(std::is_trivially_copyable_v<T>);
-    std::vector<T> v(count(max));
+    std::vector<T> v(count(max, sizeof(T)));
     bytes(v.data(), v.size() * sizeof(T));
     return v;
   }
@@ -93,6 +101,10 @@ class BinaryReader {
   [[noreturn]] void corrupt(const std::string& what) const {
     throw Error(fmt::format("{}: corrupt ({})", path_.string(), what));
   }
+  std::uint64_t bytesLeft() {
+    const auto at = static_cast<std::uint64_t>(in_.tellg());
+    return at < size_ ? size_ - at : 0;
+  }
   // Throws unless the whole file was read.
   void expectEnd() {
     if (in_.peek() != std::char_traits<char>::eof()) corrupt("data after its end");
@@ -101,6 +113,7 @@ class BinaryReader {
  private:
   std::filesystem::path path_;
   std::ifstream in_;
+  std::uint64_t size_ = 0;
   std::uint32_t version_ = 0;
 };
 

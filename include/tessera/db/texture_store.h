@@ -131,6 +131,11 @@ std::unique_ptr<TextureStore> openSqliteStore(const std::filesystem::path& path,
 std::unique_ptr<TextureStore> openTextureStore(const std::string& location,
                                                const OpenOptions& options = {});
 
+// A location as a file that outlives the run names it (a saved map): a file path made
+// absolute, a server's URL without its password. Two locations name the same database when
+// these agree.
+std::string lastingLocation(const std::string& location);
+
 // Wraps a server's store so that its commits wait in a local journal (options.journal, or a
 // new file in the temporary directory) while the server is away (ServerUnavailable), and are
 // sent in order when it is back. openTextureStore does this for every writable server URL.

@@ -267,12 +267,18 @@ class BitmapFiles {
   // written.
   void flush();
 
+  // The run's folder, where the bitmaps' files are written.
+  const std::filesystem::path& outDir() const { return out_dir_; }
   // Where the newest bitmap of each patch id lies on its patch, and its files.
   const planes::TextureBindings& written() const { return written_; }
   // The bitmaps of an earlier session whose map this run continues (their files are there).
   void adopt(const planes::TextureBindings& earlier);
-  // A copy of written(), safe while another thread keeps bitmaps (a checkpoint of the map).
-  planes::TextureBindings writtenNow() const;
+  // The bindings of written() whose version is the one `versions` gives their patch, with
+  // second names for their files under `dir` (the same names as under the run's folder):
+  // a checkpoint of the map, safe while another thread keeps bitmaps. Throws core::Error
+  // naming a file that cannot be linked or copied.
+  planes::TextureBindings linkCurrentInto(const std::filesystem::path& dir,
+                                          const std::map<int, int>& versions) const;
   // Build time of each bitmap, and their total area (m^2 of observed texels).
   const StageTimer& timer() const { return timer_; }
   double areaBuiltM2() const { return area_built_m2_; }

@@ -12,6 +12,7 @@
 #include <map>
 #include <mutex>
 #include <optional>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -125,9 +126,12 @@ class CommitStage {
   // A failed commit is counted and logged, as for process().
   void retire(int patch_id);
   // The instances of an earlier session whose map this run continues, each patch's newest
-  // layers; `texels`: each patch's bitmap size, for the map's economy.
-  void adopt(const std::map<int, std::vector<db::TextureInstance>>& earlier,
-             const std::map<int, std::size_t>& texels);
+  // layers; `texels`: each patch's bitmap size, for the map's economy. Their rows in the
+  // database (under the earlier sessions' runs) are retired when this run commits a new
+  // version of the patch. Returns the patches whose textures the database no longer has
+  // (a checkpoint older than their last commit): they are not adopted.
+  std::vector<int> adopt(const std::map<int, std::vector<db::TextureInstance>>& earlier,
+                         const std::map<int, std::size_t>& texels);
 
   // The newest committed instances of each patch id (its layers, 0 first).
   const std::map<int, std::vector<db::TextureInstance>>& instances() const { return instances_; }
@@ -149,9 +153,14 @@ class CommitStage {
   db::TextureStore& store_;
   reuse::StoreCatalog& catalog_;
   reuse::CommitRules rules_;
+  // Adds to `commit` the retirement of an adopted patch's rows under earlier runs.
+  void retireEarlierRuns(int patch_id, db::Commit& commit);
+
   mutable std::mutex instances_mutex_;  // instances_ changes on the committing thread
   std::map<int, std::vector<db::TextureInstance>> instances_;
   std::map<int, reuse::ShownPatch> shown_;  // each patch as the map shows it now
+  // Each adopted patch's earlier runs, whose rows its next commit or retirement replaces.
+  std::map<int, std::set<std::int64_t>> earlier_runs_;
   CommitFigures figures_;
   StageTimer timer_;
 };

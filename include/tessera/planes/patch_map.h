@@ -264,8 +264,9 @@ class PatchMap {
   // next session's pose graph does not hold them. Throws core::Error naming a file that
   // cannot be written.
   void saveState(const std::filesystem::path& file, const std::filesystem::path& samples_dir) const;
-  // Replaces the map with a saved one. Its samples are copied into the spill folder (set it
-  // first; without one they are read into memory) and read when their tile grows again.
+  // Replaces the map with a saved one. Finalized patches' samples are linked into the spill
+  // folder (set it first; without one they are read into memory) and read when their tile
+  // grows again; growing patches' are read into memory.
   // Throws core::Error naming a missing, corrupt or newer file, or one saved with other cell
   // sizes; the map is unchanged then.
   void loadState(const std::filesystem::path& file, const std::filesystem::path& samples_dir);

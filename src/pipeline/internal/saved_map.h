@@ -28,20 +28,27 @@ namespace tessera::pipeline::internal {
 struct RunParts;
 
 struct SavedMap {
-  int sessions = 0;      // runs that built the map
+  std::filesystem::path folder;  // OUT/map
+  int sessions = 0;              // runs that built the map
   std::string database;  // the texture database its instances name
   std::vector<fusion::MapKeyframe> keyframes;
   core::Trajectory trajectory;  // the camera's poses in the map, every session so far
   planes::PatchMap patches{planes::PatchMapConfig{}};
-  planes::TextureBindings bitmaps;  // each patch's newest bitmap (its files in DIR)
+  planes::TextureBindings bitmaps;  // each patch's newest bitmap (its files in `folder`)
   std::map<int, std::vector<db::TextureInstance>> instances;  // each patch's newest layers
 };
 
-// The map saved in `run_dir`; its colour samples are copied to `spill_dir`. Throws
-// core::Error naming what is missing, corrupt or written by a newer tessera; nothing in
-// `run_dir` is changed.
+// The map saved in `run_dir` (or the earlier one a swap cut off left as map.old, which becomes
+// the map again); finalized patches' colour samples are linked into `spill_dir`. Throws
+// core::Error naming what is missing, corrupt or written by a newer tessera, or when
+// `database` (--db) names another database than the map's; nothing in `run_dir` is changed
+// then.
 SavedMap readSavedMap(const std::filesystem::path& run_dir, const planes::PatchMapConfig& config,
-                      const std::filesystem::path& spill_dir);
+                      const std::filesystem::path& spill_dir,
+                      const std::optional<std::string>& database);
+
+// Removes a map saved in `run_dir` (a new run there that does not continue it), saying so.
+void removeSavedMap(const std::filesystem::path& run_dir);
 
 // Gives the run's stages the earlier map: keyframes to the tracker, patches to the plane
 // stage, bitmaps and instances to the files and commit stages. A patch whose texture the map
