@@ -232,6 +232,9 @@ struct Tracker::State {
   bool interrupted = false;
   // An earlier session's map was given (continueMap) and no frame is posed in it yet.
   bool awaiting_map = false;
+  // past[i] for i below this is a continued map's keyframe in another frame than this
+  // session's (the session was not found in it): never a relocalisation candidate.
+  std::size_t first_in_frame = 0;
 };
 
 Tracker::Tracker(const TrackerConfig& config)
@@ -293,9 +296,10 @@ TrackingResult Tracker::track(const core::Frame& frame, const core::Isometry& in
   const auto coveredByPast = [&](const core::Isometry& T_W_C) {
     if (config_.relocalisation_cover_radius_m <= 0.0 || s.keyframes.empty()) return false;
     const int recent = s.keyframes.front()->id;
-    for (const PastKeyframe& past : s.past) {
-      if (past.id >= recent) break;
-      if (core::posesNear(past.T_W_C, T_W_C, config_.relocalisation_cover_radius_m,
+    for (auto past = s.past.begin() + static_cast<std::ptrdiff_t>(s.first_in_frame);
+         past != s.past.end(); ++past) {
+      if (past->id >= recent) break;
+      if (core::posesNear(past->T_W_C, T_W_C, config_.relocalisation_cover_radius_m,
                           config_.relocalisation_cover_angle_deg)) {
         return true;
       }
@@ -371,6 +375,7 @@ TrackingResult Tracker::track(const core::Frame& frame, const core::Isometry& in
     const std::vector<PlaceCandidate> candidates = s.places.query(
         strongestDescriptors(*current_features, kRelocalisationQueryDescriptors), query);
     for (const PlaceCandidate& candidate : candidates) {
+      if (static_cast<std::size_t>(candidate.keyframe) < s.first_in_frame) continue;
       const PastKeyframe& key = s.past[static_cast<std::size_t>(candidate.keyframe)];
       const auto pose = estimateFeaturePose(key.features, *current_features, k, config_.features);
       if (pose) return core::Isometry(key.T_W_C * pose->T_current_reference.inverse());
@@ -395,6 +400,7 @@ TrackingResult Tracker::track(const core::Frame& frame, const core::Isometry& in
       return result;
     }
     s.awaiting_map = false;
+    s.first_in_frame = s.past.size();
     result.problem = fmt::format(
         "not found in the continued map in {} frames: this session maps in its own frame",
         s.lost_in_a_row);

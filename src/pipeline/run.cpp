@@ -82,7 +82,9 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
 
   RunSummary summary = internal::summariseRun(parts, options, wall_s);
   std::vector<std::filesystem::path> files = internal::exportRun(parts, options, summary);
-  if (earlier) {
+  // A session not found in the map is in another frame: its trajectory and mesh are its own.
+  const bool found = earlier && summary.tracking.continued_map_found_at_frame.has_value();
+  if (found) {
     try {
       internal::prependEarlierTrajectory(options.out_dir, *earlier);
     } catch (const core::Error& e) {

@@ -106,7 +106,8 @@ std::vector<std::filesystem::path> exportRun(RunParts& parts, const RunOptions& 
   // The mesh is written even when the source ended abnormally, so work is kept.
   fusion::SurfaceMesh mesh = finalMesh(parts, summary.loops);
   const std::filesystem::path earlier_mesh = options.out_dir / "map" / "mesh.ply";
-  if (options.continue_map && std::filesystem::is_regular_file(earlier_mesh)) {
+  if (options.continue_map && summary.tracking.continued_map_found_at_frame &&
+      std::filesystem::is_regular_file(earlier_mesh)) {
     try {
       // Two voxels: within them the sessions' surfaces are one surface.
       mesh = fusion::mergeSurfaces(fusion::readPly(earlier_mesh), mesh,

@@ -59,11 +59,10 @@ RunParts::RunParts(core::FrameSource& input, const RunConfig& config, const RunO
       catalog(*store, config.match),
       describe(config.textures, config.match, config.pattern, &catalog),
       commit(*store, catalog, {config.match, config.pattern, run_id}),
-      map_saver(options.save_map
-                    ? std::make_unique<MapSaver>(options.out_dir, store->location(), earlier,
-                                                 config.pipeline.checkpoint_every_s, planes,
-                                                 bitmaps, commit, loop_closer.get())
-                    : nullptr),
+      map_saver(options.save_map ? std::make_unique<MapSaver>(
+                                       options.out_dir, store->location(), earlier,
+                                       config.pipeline.checkpoint_every_s, planes, bitmaps, commit)
+                                 : nullptr),
       stages(source_stage, tracking, integration, planes, describe, commit, bitmaps, sink,
              loop_closer.get(), options.listener, config.pipeline.return_freed_memory_s,
              map_saver.get()) {

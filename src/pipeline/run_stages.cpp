@@ -20,6 +20,7 @@ FusedFrame RunStages::closeLoops(FusedFrame fused) {
 
 FusedFrame RunStages::findPlanes(FusedFrame fused) {
   FusedFrame out = planes_.process(std::move(fused));
+  if (map_saver_ != nullptr && out.own_frame) map_saver_->sessionNotFound();
   if (map_saver_ != nullptr && !out.frame.source_interrupted) {
     if (const auto pose = mapPoseOf(out)) {
       map_saver_->addPose(out.frame.timestamp_ns, *pose);

@@ -247,11 +247,10 @@ void prependEarlierTrajectory(const fs::path& run_dir, const SavedMap& earlier) 
 
 MapSaver::MapSaver(fs::path run_dir, std::string database, const SavedMap* earlier,
                    double checkpoint_every_s, const PlaneStage& planes, const BitmapFiles& bitmaps,
-                   const CommitStage& commit, const loop::LoopCloser* loop_closer)
+                   const CommitStage& commit)
     : planes_(planes),
       bitmaps_(bitmaps),
       commit_(commit),
-      loop_closer_(loop_closer),
       run_dir_(std::move(run_dir)),
       database_(db::lastingLocation(database)),
       checkpoint_every_s_(checkpoint_every_s) {
@@ -276,7 +275,7 @@ void MapSaver::addKeyframes(
 
 void MapSaver::checkpoint(std::int64_t frame_index) {
   last_frame_ = frame_index;
-  if (checkpoint_every_s_ <= 0.0 ||
+  if (not_found_ || checkpoint_every_s_ <= 0.0 ||
       std::chrono::duration<double>(std::chrono::steady_clock::now() - last_save_).count() <
           checkpoint_every_s_) {
     return;
@@ -290,6 +289,17 @@ void MapSaver::checkpoint(std::int64_t frame_index) {
   last_save_ = std::chrono::steady_clock::now();
 }
 
+void MapSaver::save() {
+  if (not_found_) {
+    spdlog::warn(
+        "{}: kept as it was; this session was not found in it, and its own map (in "
+        "another frame) is not saved",
+        (run_dir_ / "map").string());
+    return;
+  }
+  write(true);
+}
+
 void MapSaver::write(bool final) {
   const auto start = std::chrono::steady_clock::now();
   const fs::path dir = run_dir_ / "map";
@@ -301,26 +311,28 @@ void MapSaver::write(bool final) {
 
   const planes::PatchMap& patches = planes_.map();
   patches.saveState(saving / "patch_map.bin", saving / "samples");
-  // This session's keyframes at their corrected poses.
+  // This session's poses and keyframes in the patch map's frame: the drift measured against
+  // the patches (in the poses recorded, PlaneStage::process) and the loop correction the plane
+  // stage follows, read once.
+  const auto loop_correction = planes_.loopCorrection();
+  core::Trajectory trajectory = trajectory_;
+  if (loop_correction) {
+    for (auto& [t, pose] : trajectory) pose = loop_correction->at(t) * pose;
+  }
   std::vector<fusion::MapKeyframe> keyframes;
   {
     const std::lock_guard lock(keyframes_mutex_);
     keyframes = keyframes_;
   }
-  if (loop_closer_ != nullptr) {
-    if (const auto correction = loop_closer_->correction()) {
-      for (std::size_t i = earlier_keyframes_; i < keyframes.size(); ++i) {
-        keyframes[i].T_W_C = correction->at(keyframes[i].timestamp_ns) * keyframes[i].T_W_C;
-      }
+  for (std::size_t i = earlier_keyframes_; i < keyframes.size(); ++i) {
+    fusion::MapKeyframe& keyframe = keyframes[i];
+    if (const auto pose = trajectory.find(keyframe.timestamp_ns); pose != trajectory.end()) {
+      keyframe.T_W_C = pose->second;
+    } else if (loop_correction) {
+      keyframe.T_W_C = loop_correction->at(keyframe.timestamp_ns) * keyframe.T_W_C;
     }
   }
   fusion::writeMapKeyframes(saving / "keyframes.bin", keyframes);
-  core::Trajectory trajectory = trajectory_;
-  if (loop_closer_ != nullptr) {
-    if (const auto correction = loop_closer_->correction()) {
-      for (auto& [t, pose] : trajectory) pose = correction->at(t) * pose;
-    }
-  }
   trajectory.insert(earlier_trajectory_.begin(), earlier_trajectory_.end());
   core::writeTumTrajectory(trajectory, saving / "trajectory.txt");
 

@@ -261,6 +261,10 @@ TEST(ContinueMap, ASessionNotFoundInTheMapLeavesItsPatchesAsTheyWere) {
     EXPECT_EQ(now[id]["area_m2"], patch["area_m2"]) << "patch " << id;
   }
   EXPECT_GT(after["patches"].size(), before["patches"].size());  // the session's own
+  // The saved map is kept as the first session left it: a map in two frames is no map.
+  const nlohmann::json session = readJson(out / "map/session.json");
+  EXPECT_EQ(session["sessions"], 1);
+  EXPECT_EQ(session["patches"], before["patches"].size());
 }
 
 }  // namespace

@@ -206,6 +206,8 @@ class PlaneStage {
       std::shared_ptr<const loop::MapCorrection> last_correction = nullptr);
 
   const planes::PatchMap& map() const { return map_; }
+  // The loop correction the map follows now (none before the first).
+  std::shared_ptr<const loop::MapCorrection> loopCorrection() const { return loop_correction_; }
   // Continues an earlier session's map (`tessera run --continue`), before the first frame.
   void continueMap(planes::PatchMap&& map) { map_ = std::move(map); }
   // Where finalized patches' colour samples go when they leave memory (PatchMap).

@@ -17,7 +17,6 @@
 #include "tessera/core/trajectory.h"
 #include "tessera/db/texture_record.h"
 #include "tessera/fusion/tracker.h"
-#include "tessera/loop/loop_closer.h"
 #include "tessera/pipeline/stages.h"
 #include "tessera/pipeline/texture_db_stages.h"
 #include "tessera/planes/patch_map.h"
@@ -68,7 +67,7 @@ class MapSaver {
   // The map is read from the stages given, which outlive the saver.
   MapSaver(std::filesystem::path run_dir, std::string database, const SavedMap* earlier,
            double checkpoint_every_s, const PlaneStage& planes, const BitmapFiles& bitmaps,
-           const CommitStage& commit, const loop::LoopCloser* loop_closer);
+           const CommitStage& commit);
 
   // The keyframes the tracker made; those it relocalises against are kept (frame path).
   void addKeyframes(const std::vector<std::shared_ptr<const fusion::KeyframeRecord>>& keyframes);
@@ -79,8 +78,11 @@ class MapSaver {
   // Saves when checkpoint_every_s has passed since the last save (frame path, after the
   // plane stage). A save that fails is logged; the earlier map is kept.
   void checkpoint(std::int64_t frame_index);
+  // The session was not found in the map it continues and maps in its own frame: the saved
+  // map is kept as it was (a map of two frames would be no map), and nothing more is saved.
+  void sessionNotFound() { not_found_ = true; }
   // The end of the run; throws core::Error naming a file that cannot be written.
-  void save() { write(true); }
+  void save();
 
   std::size_t checkpoints() const { return checkpoints_; }
 
@@ -91,7 +93,6 @@ class MapSaver {
   const PlaneStage& planes_;
   const BitmapFiles& bitmaps_;
   const CommitStage& commit_;
-  const loop::LoopCloser* loop_closer_;  // null without loop closure
 
   std::filesystem::path run_dir_;
   std::string database_;
@@ -106,6 +107,7 @@ class MapSaver {
   core::Trajectory trajectory_;             // this session's
   std::optional<std::int64_t> last_frame_;  // the newest frame the map holds
   std::size_t checkpoints_ = 0;
+  bool not_found_ = false;  // sessionNotFound()
 };
 
 }  // namespace tessera::pipeline::internal
