@@ -74,8 +74,9 @@ CLI::App* addRunCommand(CLI::App& app, RunArguments& args) {
                   "--publish: the tf frame tessera moves with the camera pose (map -> it)")
       ->capture_default_str();
   run->add_option("--skip-frames", args.skip_frames,
-                  "Start after this many good frames of SOURCE (a recording replayed from the "
-                  "middle; with --max-frames, a range of it)")
+                  "Start at SOURCE's frame N: the N frames before it, readable or not, are "
+                  "skipped (a recording replayed from the middle; with --max-frames, a range "
+                  "of it)")
       ->capture_default_str();
   run->add_option("--continue", args.continue_dir,
                   "Continue the map saved in this run folder (OUT/map, written at the end of "

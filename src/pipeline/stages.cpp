@@ -58,6 +58,12 @@ std::optional<core::Frame> SourceStage::read() {
         ++frames_read_;
         return std::move(result.frame);
       case core::ReadStatus::kBadFrame:
+        // Skipped frames are positions in the source, readable or not: --skip-frames N starts
+        // at the frame numbered N (a saved map's last_frame + 1 resumes after it).
+        if (skip_frames_ > 0) {
+          --skip_frames_;
+          continue;
+        }
         ++figures_.frames_bad;
         spdlog::warn("{}: skipped {}", source_.name(), result.problem);
         break;

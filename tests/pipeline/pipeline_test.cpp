@@ -118,6 +118,16 @@ class ExportedFiles : public RunListener {
   std::vector<fs::path> files;
 };
 
+// --skip-frames N starts at the frame numbered N, bad frames before it included: a saved
+// map's last_frame + 1 resumes right after it.
+TEST(SourceStage, SkipsFramesByTheirPositionInTheSource) {
+  ScriptedSource source(8, {1, 2});
+  SourceStage stage(source, std::nullopt, nullptr, 4);
+  std::vector<std::uint64_t> read;
+  while (const auto frame = stage.next()) read.push_back(frame->index);
+  EXPECT_EQ(read, (std::vector<std::uint64_t>{4, 5, 6, 7}));
+}
+
 TEST(Pipeline, RunsEveryGoodFrameAndWritesTheOutputs) {
   const fs::path out = test::freshTempDir();
   ScriptedSource source(8, {3});

@@ -23,7 +23,7 @@ struct RunOptions {
   int threads = 0;  // 0: hardware threads
   PoseSource poses = PoseSource::kTrack;
   std::optional<std::size_t> max_frames;
-  std::size_t skip_frames = 0;  // the source's first good frames dropped unread by the map
+  std::size_t skip_frames = 0;  // the source's first frames (readable or not) dropped
   int holdout_every = 0;  // every N-th frame is posed only, for eval's held-out views (0: none)
   bool residual = false;  // map.obj / map.glb also get the non-planar rest of the TSDF surface
   // The texture database the run grows (or reuses from earlier runs); OUT/textures.db when

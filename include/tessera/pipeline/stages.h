@@ -41,8 +41,8 @@ struct CommitMessage;  // texture_db_stages.h
 class SourceStage {
  public:
   // `stop`, when given, ends the stream as soon as it is set (Ctrl-C, SIGTERM).
-  // The first `skip_frames` good frames are read and dropped (a recording replayed from the
-  // middle).
+  // The first `skip_frames` frames, readable or not, are read and dropped (a recording
+  // replayed from the middle starts at the frame numbered skip_frames).
   SourceStage(core::FrameSource& source, std::optional<std::size_t> max_frames,
               const std::atomic<bool>* stop = nullptr, std::size_t skip_frames = 0);
 
