@@ -90,6 +90,17 @@ std::map<std::string, std::pair<std::uintmax_t, fs::file_time_type>> filesOf(con
   return files;
 }
 
+// The office's first `frames` frames into `out`.
+void runOfficeStart(const fs::path& out, std::size_t frames, const RunConfig& config,
+                    bool save_map = true) {
+  drivers::oni::OniSource source(test::sourceDir() / "recordings/office.oni");
+  RunOptions options;
+  options.out_dir = out;
+  options.max_frames = frames;
+  options.save_map = save_map;
+  runPipeline(source, config, options);
+}
+
 std::string continueError(const fs::path& out, std::optional<std::string> db = std::nullopt) {
   const fs::path recording = test::sourceDir() / "recordings/office.oni";
   drivers::oni::OniSource source(recording);
@@ -114,25 +125,14 @@ TEST(ContinueMap, AMissingCorruptOrNewerMapIsRefusedAndNothingIsOverwritten) {
     GTEST_SKIP() << recording << " is not rendered (TESSERA_RENDER_DEFAULT_RECORDING=ON)";
   }
   const fs::path out = test::freshTempDir();
-  {
-    drivers::oni::OniSource source(recording);
-    RunOptions options;
-    options.out_dir = out;
-    options.max_frames = 40;
-    options.save_map = false;
-    runPipeline(source, loadRunConfig(std::nullopt), options);
-  }
+  runOfficeStart(out, 40, loadRunConfig(std::nullopt), false);
   ASSERT_FALSE(fs::exists(out / "map"));
   EXPECT_NE(continueError(out).find("no saved map to continue"), std::string::npos);
   {
     // A checkpoint after every frame, while patches are committed beside it.
-    drivers::oni::OniSource source(recording);
     RunConfig config = loadRunConfig(std::nullopt);
     config.pipeline.checkpoint_every_s = 1e-9;
-    RunOptions options;
-    options.out_dir = out;
-    options.max_frames = 40;
-    runPipeline(source, config, options);
+    runOfficeStart(out, 40, config);
   }
   ASSERT_TRUE(fs::is_regular_file(out / "map/patch_map.bin"));
   // The map holds its own bitmap files, each of its binding's size (checkpoints taken while
@@ -204,13 +204,7 @@ TEST(ContinueMap, ASwapCutOffBetweenItsRenamesContinuesTheEarlierMap) {
     GTEST_SKIP() << recording << " is not rendered (TESSERA_RENDER_DEFAULT_RECORDING=ON)";
   }
   const fs::path out = test::freshTempDir();
-  {
-    drivers::oni::OniSource source(recording);
-    RunOptions options;
-    options.out_dir = out;
-    options.max_frames = 40;
-    runPipeline(source, loadRunConfig(std::nullopt), options);
-  }
+  runOfficeStart(out, 40, loadRunConfig(std::nullopt));
   fs::rename(out / "map", out / "map.old");
   fs::create_directories(out / "map.saving");  // the new one, written whole but not swapped in
   EXPECT_EQ(continueError(out), "");
