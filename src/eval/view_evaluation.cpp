@@ -77,6 +77,31 @@ void saveComparison(const cv::Mat& rendered, const cv::Mat& captured, const cv::
   }
 }
 
+// Adds each compared pixel's squared error, per model, to the surface models[0] drew there.
+void addSurfaceErrors(const std::vector<ViewImage>& renders, const cv::Mat& captured,
+                      const cv::Mat& mask, std::vector<SurfaceError>& surfaces) {
+  for (int y = 0; y < mask.rows; ++y) {
+    const auto* compared = mask.ptr<std::uint8_t>(y);
+    const auto* surface = renders[0].surface.ptr<int>(y);
+    const auto* truth = captured.ptr<cv::Vec3b>(y);
+    for (int x = 0; x < mask.cols; ++x) {
+      if (compared[x] == 0 || surface[x] < 0 ||
+          static_cast<std::size_t>(surface[x]) >= surfaces.size()) {
+        continue;
+      }
+      SurfaceError& into = surfaces[static_cast<std::size_t>(surface[x])];
+      ++into.pixels;
+      for (std::size_t m = 0; m < renders.size(); ++m) {
+        const cv::Vec3b& drawn = renders[m].rgb.at<cv::Vec3b>(y, x);
+        for (int ch = 0; ch < 3; ++ch) {
+          const double d = static_cast<double>(drawn[ch]) - static_cast<double>(truth[x][ch]);
+          into.squared_error[m] += d * d;
+        }
+      }
+    }
+  }
+}
+
 // Spreads `wanted` views evenly over `total` candidates: every stride-th is taken.
 std::size_t strideFor(std::size_t total, int wanted) {
   if (wanted <= 0) return 1;
@@ -85,6 +110,12 @@ std::size_t strideFor(std::size_t total, int wanted) {
 }
 
 }  // namespace
+
+std::optional<double> SurfaceError::psnr(std::size_t model) const {
+  if (pixels == 0) return std::nullopt;
+  const double mse = squared_error.at(model) / (3.0 * static_cast<double>(pixels));
+  return mse > 0.0 ? 10.0 * std::log10(255.0 * 255.0 / mse) : 99.0;
+}
 
 std::optional<double> ViewEvaluation::mean(std::size_t model, bool held_out,
                                            double ImageSimilarity::*figure) const {
@@ -124,6 +155,9 @@ ViewEvaluation evaluateViews(const std::vector<ViewModel>& models, core::FrameSo
   if (models.empty()) throw core::Error("view evaluation: no model to render");
   ViewEvaluation evaluation;
   for (const ViewModel& model : models) evaluation.models.push_back(model.name);
+  for (const std::string& name : models[0].mesh->surfaces) {
+    evaluation.surfaces.push_back({name, 0, std::vector<double>(models.size(), 0.0)});
+  }
   if (!options.save_dir.empty()) {
     std::error_code error;
     std::filesystem::create_directories(options.save_dir, error);
@@ -192,6 +226,7 @@ ViewEvaluation evaluateViews(const std::vector<ViewModel>& models, core::FrameSo
     for (const ViewImage& render : renders) {
       score.similarity.push_back(*compareImages(render.rgb, frame.rgb, mask));
     }
+    if (!held_out) addSurfaceErrors(renders, frame.rgb, mask, evaluation.surfaces);
     const std::size_t scored = evaluation.views.size();
     if (!options.save_dir.empty() && saved < options.save_views &&
         scored % static_cast<std::size_t>(save_every) == 0) {
@@ -224,6 +259,38 @@ constexpr NamedFigure kFigures[] = {
     {"detail_correlation", &ImageSimilarity::detail_correlation, false},
     {"detail_energy_ratio", &ImageSimilarity::detail_energy_ratio, false}};
 
+constexpr std::size_t kWorstSurfaces = 10;
+
+// The surfaces whose error exceeds the baseline's most over the training views (the model's
+// own error without a baseline): where a map loses, by how much, and its share of what the
+// losing surfaces lose together (the map may still win overall).
+nlohmann::json worstSurfaces(const ViewEvaluation& evaluation) {
+  const std::size_t reference = evaluation.models.size() > 1 ? 1 : 0;
+  const auto excess = [&](const SurfaceError& s) {
+    return s.squared_error[0] - (reference > 0 ? s.squared_error[reference] : 0.0);
+  };
+  std::vector<const SurfaceError*> seen;
+  double total_excess = 0.0;
+  for (const SurfaceError& surface : evaluation.surfaces) {
+    if (surface.pixels == 0) continue;
+    seen.push_back(&surface);
+    total_excess += std::max(0.0, excess(surface));  // what the losing surfaces lose
+  }
+  std::sort(seen.begin(), seen.end(),
+            [&](const SurfaceError* a, const SurfaceError* b) { return excess(*a) > excess(*b); });
+  nlohmann::json worst = nlohmann::json::array();
+  for (std::size_t i = 0; i < std::min(kWorstSurfaces, seen.size()); ++i) {
+    const SurfaceError& s = *seen[i];
+    nlohmann::json entry = {{"surface", s.name}, {"pixels", s.pixels}, {"psnr_db", *s.psnr(0)}};
+    if (reference > 0) {
+      entry["baseline_psnr_db"] = *s.psnr(reference);
+      entry["share_of_loss"] = total_excess > 0.0 ? excess(s) / total_excess : 0.0;
+    }
+    worst.push_back(std::move(entry));
+  }
+  return worst;
+}
+
 }  // namespace
 
 nlohmann::json viewFigures(const ViewEvaluation& evaluation) {
@@ -246,6 +313,7 @@ nlohmann::json viewFigures(const ViewEvaluation& evaluation) {
           has_baseline ? figure(evaluation.mean(1, held_out, f.figure)) : nlohmann::json(nullptr);
     }
   }
+  figures["view_surfaces_worst"] = worstSurfaces(evaluation);
   return figures;
 }
 

@@ -90,16 +90,17 @@ class Rasteriser {
   Rasteriser(const core::Intrinsics& k, ViewImage& view) : k_(k), view_(view) {}
 
   // Draws one convex polygon (a clipped triangle) as a fan.
-  void drawPolygon(const std::array<Corner, 4>& corners, int n, const TextureImage* texture) {
+  void drawPolygon(const std::array<Corner, 4>& corners, int n, const TextureImage* texture,
+                   int surface) {
     for (int i = 1; i + 1 < n; ++i) {
       drawTriangle({corners[0], corners[static_cast<std::size_t>(i)],
                     corners[static_cast<std::size_t>(i + 1)]},
-                   texture);
+                   texture, surface);
     }
   }
 
  private:
-  void drawTriangle(const std::array<Corner, 3>& c, const TextureImage* texture) {
+  void drawTriangle(const std::array<Corner, 3>& c, const TextureImage* texture, int surface) {
     // In double precision: a wall's long quads, clipped at the near plane, project far off
     // the image, and float barycentrics then lose the millimetre that keeps an overlay in
     // front of its wall.
@@ -123,6 +124,7 @@ class Rasteriser {
     for (int y = y_min; y <= y_max; ++y) {
       auto* depth = view_.depth.ptr<float>(y);
       auto* rgb = view_.rgb.ptr<cv::Vec3b>(y);
+      auto* surface_at = view_.surface.ptr<int>(y);
       for (int x = x_min; x <= x_max; ++x) {
         const Eigen::Vector2d q(x, y);
         // Barycentric coordinates from the signed edge functions (either winding).
@@ -144,6 +146,7 @@ class Rasteriser {
           continue;
         }
         depth[x] = z;
+        surface_at[x] = surface;
         for (int ch = 0; ch < 3; ++ch) {
           rgb[x][ch] = cv::saturate_cast<std::uint8_t>(colour[ch]);
         }
@@ -209,6 +212,8 @@ RenderMesh readTexturedObj(const std::filesystem::path& path) {
     texture_of_material.push_back(it->second);
   }
   for (const tinyobj::shape_t& shape : reader.GetShapes()) {
+    const auto surface = static_cast<int>(mesh.surfaces.size());
+    mesh.surfaces.push_back(shape.name);
     const auto& indices = shape.mesh.indices;
     for (std::size_t f = 0; f < shape.mesh.num_face_vertices.size(); ++f) {
       const std::size_t first = 3 * f;
@@ -228,6 +233,7 @@ RenderMesh readTexturedObj(const std::filesystem::path& path) {
       }
       mesh.triangles.push_back(triangle);
       mesh.texture_of.push_back(texture);
+      mesh.surface_of.push_back(surface);
     }
   }
   return mesh;
@@ -251,6 +257,7 @@ ViewImage renderView(const RenderMesh& mesh, const core::Intrinsics& intrinsics,
   ViewImage view;
   view.rgb = cv::Mat::zeros(intrinsics.height, intrinsics.width, CV_8UC3);
   view.depth = cv::Mat::zeros(intrinsics.height, intrinsics.width, CV_32F);
+  view.surface = cv::Mat(intrinsics.height, intrinsics.width, CV_32S, cv::Scalar(-1));
   const Eigen::Affine3f T_C_W = T_W_C.inverse().cast<float>();
   std::vector<Eigen::Vector3f> vertices_C(mesh.vertices.size());
   for (std::size_t i = 0; i < mesh.vertices.size(); ++i) vertices_C[i] = T_C_W * mesh.vertices[i];
@@ -259,6 +266,7 @@ ViewImage renderView(const RenderMesh& mesh, const core::Intrinsics& intrinsics,
   std::array<Corner, 4> clipped;
   for (std::size_t f = 0; f < mesh.triangles.size(); ++f) {
     const TextureImage* texture = nullptr;
+    const int surface = f < mesh.surface_of.size() ? mesh.surface_of[f] : -1;
     if (mesh.textured()) {
       if (mesh.texture_of[f] < 0) continue;  // no image: the patch is not textured
       texture = &mesh.textures[static_cast<std::size_t>(mesh.texture_of[f])];
@@ -277,7 +285,7 @@ ViewImage renderView(const RenderMesh& mesh, const core::Intrinsics& intrinsics,
       any_in_front = any_in_front || vertices_C[v].z() >= near;
     }
     if (!any_in_front) continue;
-    rasteriser.drawPolygon(clipped, clipNear(corners, near, clipped), texture);
+    rasteriser.drawPolygon(clipped, clipNear(corners, near, clipped), texture, surface);
   }
   return view;
 }

@@ -118,6 +118,10 @@ RenderMesh readTexturedGlb(const std::filesystem::path& path) {
         throw core::Error(
             fmt::format("node '{}' has a transform (tessera writes none)", node.name));
       }
+      const auto surface = static_cast<int>(mesh.surfaces.size());
+      mesh.surfaces.push_back(!node.name.empty()
+                                  ? node.name
+                                  : model.meshes.at(static_cast<std::size_t>(node.mesh)).name);
       for (const tinygltf::Primitive& primitive :
            model.meshes.at(static_cast<std::size_t>(node.mesh)).primitives) {
         const int texture =
@@ -155,6 +159,7 @@ RenderMesh readTexturedGlb(const std::filesystem::path& path) {
           }
           mesh.triangles.push_back(triangle);
           mesh.texture_of.push_back(texture);
+          mesh.surface_of.push_back(surface);
         }
       }
     }

@@ -76,6 +76,34 @@ RenderMesh wallMap(double shift_x_m) {
   return mesh;
 }
 
+// The same wall as two surfaces, "left" (x < 0) and "right", the right one moved by
+// `shift_right_m` along x.
+RenderMesh splitWallMap(double shift_right_m) {
+  RenderMesh mesh = wallMap(0.0);
+  mesh.vertices.clear(), mesh.triangles.clear(), mesh.texture_of.clear(), mesh.uvs.clear();
+  mesh.surfaces = {"left", "right"};
+  for (int side = 0; side < 2; ++side) {
+    const double x0 = side == 0 ? -kHalfSide : 0.0, shift = side == 0 ? 0.0 : shift_right_m;
+    const auto first = static_cast<int>(mesh.vertices.size());
+    const float s0 = side == 0 ? 0.0F : 0.5F;
+    const Eigen::Vector2f st[4] = {{s0, 0}, {s0 + 0.5F, 0}, {s0 + 0.5F, 1}, {s0, 1}};
+    for (const auto& [x, y] : {std::pair{x0, -kHalfSide},
+                               {x0 + kHalfSide, -kHalfSide},
+                               {x0 + kHalfSide, kHalfSide},
+                               {x0, kHalfSide}}) {
+      mesh.vertices.emplace_back(static_cast<float>(x + shift), static_cast<float>(y),
+                                 static_cast<float>(kWallZ));
+    }
+    for (const Eigen::Vector3i& corners : {Eigen::Vector3i(0, 1, 2), Eigen::Vector3i(0, 2, 3)}) {
+      mesh.triangles.push_back(corners + Eigen::Vector3i::Constant(first));
+      mesh.texture_of.push_back(0);
+      mesh.surface_of.push_back(side);
+      for (int j = 0; j < 3; ++j) mesh.uvs.push_back(st[corners[j]]);
+    }
+  }
+  return mesh;
+}
+
 class VectorSource : public core::FrameSource {
  public:
   explicit VectorSource(std::vector<core::Frame> frames) : frames_(std::move(frames)) {}
@@ -148,6 +176,32 @@ TEST(ViewEvaluation, AFaithfulMapScoresHighAndOneShiftedByACentimetreScoresLower
   EXPECT_GT(detail(0), 0.95);
   // The stripes along y are not moved by a shift in x: their part of the detail stays.
   EXPECT_LT(detail(1), detail(0) - 0.3);
+}
+
+TEST(ViewEvaluation, TheSurfaceThatLosesAgainstTheBaselineIsNamedWithItsShareOfTheLoss) {
+  const WallViews views = wallViews();
+  const RenderMesh split = splitWallMap(0.01), faithful = wallMap(0.0);
+  VectorSource source(views.frames);
+  const ViewEvaluation evaluation =
+      evaluateViews({{"split", &split}, {"faithful", &faithful}}, source, views.poses, {});
+  ASSERT_EQ(evaluation.surfaces.size(), 2u);
+  const SurfaceError& left = evaluation.surfaces[0];
+  const SurfaceError& right = evaluation.surfaces[1];
+  EXPECT_GT(left.pixels, 100'000u);
+  EXPECT_GT(right.pixels, 100'000u);
+  // Every compared training pixel belongs to one surface.
+  EXPECT_EQ(left.pixels + right.pixels, evaluation.pixels(false));
+  // The left half is the faithful map itself (split into other triangles); the right half a
+  // quarter stripe off.
+  EXPECT_NEAR(*left.psnr(0), *left.psnr(1), 0.01);  // the same texels, split differently
+  EXPECT_GT(*left.psnr(0), 32.0);
+  EXPECT_LT(*right.psnr(0), *right.psnr(1) - 10.0);
+
+  const nlohmann::json worst = viewFigures(evaluation)["view_surfaces_worst"];
+  ASSERT_EQ(worst.size(), 2u);
+  EXPECT_EQ(worst[0]["surface"], "right");
+  EXPECT_NEAR(worst[0]["share_of_loss"].get<double>(), 1.0, 1e-4);
+  EXPECT_NEAR(worst[1]["share_of_loss"].get<double>(), 0.0, 1e-4);
 }
 
 // A camera sliding along x at 0.5 m/s whose colour image is taken 12 ms after its depth image
@@ -223,7 +277,7 @@ TEST(ViewRender, ReadsATexturedObjAndLeavesTransparentTexelsUncovered) {
       << "newmtl square\nKd 1 1 1\nmap_Kd square.png\nmap_d square.png\n";
   std::ofstream(dir / "square.obj")
       << "mtllib square.mtl\nv -0.5 -0.5 2\nv 0.5 -0.5 2\nv 0.5 0.5 2\nv -0.5 0.5 2\n"
-         "vt 0 1\nvt 1 1\nvt 1 0\nvt 0 0\nusemtl square\nf 1/1 2/2 3/3 4/4\n";
+         "vt 0 1\nvt 1 1\nvt 1 0\nvt 0 0\no patch_7_v2\nusemtl square\nf 1/1 2/2 3/3 4/4\n";
   const RenderMesh mesh = readTexturedObj(dir / "square.obj");
   ASSERT_EQ(mesh.triangles.size(), 2u);
   const ViewImage view = renderView(mesh, test::kinectIntrinsics(), core::Isometry::Identity());
@@ -232,6 +286,10 @@ TEST(ViewRender, ReadsATexturedObjAndLeavesTransparentTexelsUncovered) {
   EXPECT_EQ(view.rgb.at<cv::Vec3b>(240, 400), cv::Vec3b(0, 255, 0));
   EXPECT_EQ(view.depth.at<float>(240, 250), 0.0F);
   EXPECT_EQ(view.depth.at<float>(20, 20), 0.0F);
+  // Each drawn pixel names its surface, the OBJ's object.
+  ASSERT_EQ(mesh.surfaces, std::vector<std::string>{"patch_7_v2"});
+  EXPECT_EQ(view.surface.at<int>(240, 400), 0);
+  EXPECT_EQ(view.surface.at<int>(240, 250), -1);
   EXPECT_THROW(readTexturedObj(dir / "missing.obj"), core::Error);
   std::filesystem::remove_all(dir);
 }

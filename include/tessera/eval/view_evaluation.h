@@ -62,9 +62,20 @@ struct ViewScore {
   std::vector<ImageSimilarity> similarity;  // per model
 };
 
+// One surface of the first model (RenderMesh::surfaces: a patch's object) over the training
+// views: the compared pixels it covered and each model's summed squared error there.
+struct SurfaceError {
+  std::string name;
+  std::size_t pixels = 0;
+  std::vector<double> squared_error;  // per model, over R, G and B
+  // PSNR of `model` over this surface's pixels; nullopt without pixels.
+  std::optional<double> psnr(std::size_t model) const;
+};
+
 struct ViewEvaluation {
   std::vector<std::string> models;
   std::vector<ViewScore> views;
+  std::vector<SurfaceError> surfaces;  // per surface of models[0]'s mesh
   // Mean over the scored views (training or held-out) of one of model m's figures; nothing
   // without views.
   std::optional<double> mean(std::size_t model, bool held_out,
@@ -91,7 +102,7 @@ ViewEvaluation evaluateViews(const std::vector<ViewModel>& models, core::FrameSo
 // and view_F_baseline_holdout_mean; view_detail_correlation_mean and
 // view_detail_energy_ratio_mean with their baseline_ variants; view_pixels,
 // view_pixels_holdout, view_frames, view_frames_holdout (null where there are no views);
-// view_pose_time.
+// view_pose_time; view_surfaces_worst, the surfaces that lose most against the baseline.
 nlohmann::json viewFigures(const ViewEvaluation& evaluation);
 
 }  // namespace tessera::eval

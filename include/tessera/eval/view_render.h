@@ -3,6 +3,7 @@
 // textured map (patches.obj, map.obj or map.glb with their RGBA images) or a vertex-coloured mesh
 // (mesh.ply) from a camera pose into an image the size of the captured frame, with a depth buffer.
 #include <filesystem>
+#include <string>
 #include <vector>
 
 #include <Eigen/Core>
@@ -28,6 +29,10 @@ struct RenderMesh {
   std::vector<Eigen::Vector2f> uvs;      // textured: (s, t) per triangle corner, OBJ convention
   std::vector<int> texture_of;           // textured: per triangle, index into textures or -1
   std::vector<TextureImage> textures;
+  // Textured: per triangle, index into surfaces, the OBJ object or glTF node it belongs to
+  // (patch_3_v2: a patch's version), so that a view's error can be told per surface.
+  std::vector<int> surface_of;
+  std::vector<std::string> surfaces;
   bool textured() const { return !texture_of.empty(); }
 };
 
@@ -50,6 +55,7 @@ RenderMesh readColouredPly(const std::filesystem::path& path);
 struct ViewImage {
   cv::Mat rgb;    // CV_8UC3
   cv::Mat depth;  // CV_32F, camera z in metres; 0 where nothing was drawn
+  cv::Mat surface;  // CV_32S, index into RenderMesh::surfaces; -1 where none was drawn
 };
 
 // Renders `mesh` seen by a pinhole camera at T_W_C (pixel (x, y) is the ray through
