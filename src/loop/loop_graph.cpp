@@ -189,7 +189,11 @@ void LoopGraph::add(const fusion::KeyframeRecord& record, bool depth_thinned) {
     const auto revisit =
         verifyRevisit(keyframes_[static_cast<std::size_t>(candidate.keyframe)], query, config_, why);
     stats_.verification_ms += msSince(verify_start);
-    if (!revisit) continue;
+    if (!revisit) {
+      spdlog::debug("loop: keyframe {} -> {}{} not verified: {}", query.id, candidate.keyframe,
+                    joins ? " (across segments)" : "", why);
+      continue;
+    }
     ++stats_.revisits_verified;
     last_revisit_query_ = query.id;
     last_revisit_accepted_ = false;
