@@ -46,6 +46,11 @@ CLI::App* addPlayCommand(CLI::App& app, PlayArguments& args) {
       ->check(CLI::IsMember({"rgb8", "bgr8", "bayer_rggb8", "bayer_bggr8", "bayer_gbrg8",
                              "bayer_grbg8", "yuv422", "yuv422_yuy2"}))
       ->capture_default_str();
+  play->add_option("--compressed", args.compressed,
+                   "Publish image_transport's compressed topics instead of raw images: depth on "
+                   "DEPTH/compressedDepth (16-bit PNG), colour on COLOUR/compressed as png or "
+                   "jpeg (quality 95)")
+      ->check(CLI::IsMember({"png", "jpeg"}));
   addSourceOptions(*play, args.source_args);
   return play;
 }
@@ -66,6 +71,7 @@ int playCommand(const PlayArguments& args) {
     drivers::ros1::remapTopics(options.topics, args.source_args.topic_remaps);
     options.depth_encoding = args.depth_encoding;
     options.colour_encoding = args.colour_encoding;
+    options.compressed = args.compressed;
     drivers::ros1::RosFramePublisher publisher(options);
     const std::atomic<bool>& stop = stopOnInterrupt();
     const auto wait_until =

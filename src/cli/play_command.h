@@ -18,6 +18,7 @@ struct PlayArguments {
   bool preload = false;               // read every frame before publishing the first
   std::string depth_encoding = "16UC1";
   std::string colour_encoding = "rgb8";
+  std::string compressed;  // "" raw images, or png / jpeg transports
   SourceArguments source_args;
 };
 

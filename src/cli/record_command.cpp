@@ -129,6 +129,7 @@ int recordBag(core::FrameSource& source, const RecordArguments& args) {
   options.world_frame = args.source_args.world_frame;
   if (!args.source_args.camera_frame.empty()) options.depth_frame = args.source_args.camera_frame;
   options.lz4 = args.bag_lz4;
+  options.compressed = args.bag_compressed;
   drivers::ros1::BagWriter writer(args.output, options);
   std::size_t with_pose = 0;
   const CopyResult copied =
@@ -222,6 +223,12 @@ CLI::App* addRecordCommand(CLI::App& app, RecordArguments& args) {
                              "bayer_grbg8", "yuv422", "yuv422_yuy2"}))
       ->capture_default_str();
   record->add_flag("--lz4", args.bag_lz4, ".bag: compress the bag's chunks with LZ4");
+  record
+      ->add_option("--compressed", args.bag_compressed,
+                   ".bag: write image_transport's compressed topics instead of raw images, as "
+                   "robots record them: depth on DEPTH/compressedDepth (16-bit PNG, lossless), "
+                   "colour on COLOUR/compressed as png (lossless) or jpeg (quality 95)")
+      ->check(CLI::IsMember({"png", "jpeg"}));
   addSourceOptions(*record, args.source_args);
   return record;
 }

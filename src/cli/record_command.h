@@ -18,6 +18,7 @@ struct RecordArguments {
   std::string depth_encoding = "16UC1";  // .bag output
   std::string colour_encoding = "rgb8";  // .bag output
   bool bag_lz4 = false;                  // .bag output: LZ4 chunks
+  std::string bag_compressed;            // .bag output: "" raw, or png / jpeg transports
   std::string sensor;  // synth: a named sensor profile instead of the scene's
   SourceArguments source_args;
 };

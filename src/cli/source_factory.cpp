@@ -42,7 +42,8 @@ void addRosOptions(CLI::App& command, SourceArguments& args) {
       "--topic", args.topic_remaps,
       "ROS bags and ros://: one topic named in ROS's remapping syntax ROLE:=TOPIC, ROLE one "
       "of depth, colour, depth_info, colour_info, pose (tf or PoseStamped ground "
-      "truth); may be repeated");
+      "truth); may be repeated. A depth topic ending in /compressedDepth or a colour topic "
+      "ending in /compressed is read as image_transport's compressed transport");
   command
       .add_option("--world-frame", args.world_frame,
                   "ROS bags: the tf frame the ground-truth poses are given in")

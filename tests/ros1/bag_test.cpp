@@ -9,6 +9,7 @@
 #include <geometry_msgs/PoseStamped.h>
 #include <gtest/gtest.h>
 #include <rosbag/bag.h>
+#include <rosbag/view.h>
 #include <tf2_msgs/TFMessage.h>
 #include <opencv2/core.hpp>
 
@@ -142,6 +143,44 @@ TEST(Ros1Bag, RoundTripKeepsDepthColourStampsPosesAndIntrinsics) {
       }
     }
   }
+}
+
+// Robots record image_transport's compressed topics: lossless PNG plays back the very frames,
+// JPEG the same depth; the topics are found under the known sets' names.
+TEST(Ros1Bag, CompressedTopicsPlayBackAsTheRawOnesDo) {
+  const fs::path dir = test::freshTempDir();
+  const auto frames = randomFrames(6);
+  for (const char* format : {"png", "jpeg"}) {
+    BagWriterOptions options;
+    options.compressed = format;
+    const fs::path bag = dir / fmt::format("compressed_{}.bag", format);
+    writeBag(bag, frames, options);
+    {
+      rosbag::Bag written(bag.string(), rosbag::bagmode::Read);
+      rosbag::View raw(written, rosbag::TopicQuery(openniLaunchTopics().depth));
+      EXPECT_EQ(raw.size(), 0u) << "raw depth written beside the compressed";
+      rosbag::View compressed(written,
+                              rosbag::TopicQuery(openniLaunchTopics().depth + "/compressedDepth"));
+      EXPECT_EQ(compressed.size(), 6u);
+    }
+    auto source = openBagSource(bag);
+    EXPECT_EQ(source->frameCount(), 6u);
+    const Played played = playAll(*source);
+    ASSERT_EQ(played.frames.size(), 6u) << format;
+    EXPECT_TRUE(played.bad.empty());
+    if (std::string(format) == "png") {
+      expectSameFrames(played.frames, frames);
+    } else {
+      for (std::size_t i = 0; i < played.frames.size(); ++i) {
+        EXPECT_TRUE(identical(played.frames[i].depth_mm, frames[i].depth_mm));
+        EXPECT_EQ(played.frames[i].rgb.size(), frames[i].rgb.size());
+      }
+    }
+  }
+  BagWriterOptions metric;
+  metric.compressed = "png";
+  metric.depth_encoding = "32FC1";
+  EXPECT_THROW(BagWriter(dir / "metric.bag", metric), core::ConfigError);
 }
 
 // Writes image `i` of a hand-made bag: depth 1000 + i mm, colour value 10 i.

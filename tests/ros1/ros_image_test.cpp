@@ -1,11 +1,17 @@
-// sensor_msgs/Image encodings to and from tessera's images.
+// sensor_msgs/Image encodings and the compressed transports' sensor_msgs/CompressedImage to
+// and from tessera's images.
+#include <cstring>
+#include <functional>
 #include <random>
 
 #include <gtest/gtest.h>
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include <opencv2/imgcodecs.hpp>
+
 #include "tessera/core/error.h"
+#include "tessera/drivers/ros1/compressed_image.h"
 #include "tessera/drivers/ros1/ros_image.h"
 
 namespace tessera::drivers::ros1 {
@@ -130,6 +136,83 @@ TEST(Ros1Image, UnknownEncodingsAndShortDataAreNamed) {
   sensor_msgs::Image short_depth = imageFromDepth(randomDepth(8, 4, 1), "16UC1");
   short_depth.data.resize(10);
   EXPECT_THROW(depthFromImage(short_depth), core::SourceError);
+}
+
+TEST(Ros1CompressedImage, DepthRoundTripsBitExactThroughCompressedDepth) {
+  const cv::Mat depth = randomDepth(64, 48, 11);
+  const sensor_msgs::CompressedImage message = compressedFromDepth(depth);
+  EXPECT_EQ(message.format, "16UC1; compressedDepth png");
+  const cv::Mat back = depthFromCompressed(message);
+  ASSERT_EQ(back.type(), CV_16UC1);
+  EXPECT_EQ(cv::norm(back, depth, cv::NORM_INF), 0.0);
+}
+
+// 32FC1 compressedDepth as the transport writes it (its defaults: quantisation 100, 10 m):
+// v = a / d + b, a = 100 * 101, b = 1 - a / 10; v = 0 where there is no depth.
+TEST(Ros1CompressedImage, MetricCompressedDepthIsQuantisedInverseDepth) {
+  const float a = 100.0F * 101.0F, b = 1.0F - a / 10.0F;
+  const double metres[5] = {0.0, 0.5, 1.234, 3.0, 9.5};
+  cv::Mat v(1, 5, CV_16UC1);
+  for (int i = 0; i < 5; ++i) {
+    v.at<std::uint16_t>(0, i) =
+        metres[i] == 0.0 ? 0 : static_cast<std::uint16_t>(std::lround(a / metres[i] + b));
+  }
+  sensor_msgs::CompressedImage message;
+  message.format = "32FC1; compressedDepth png";
+  message.data.assign(12, 0);
+  std::memcpy(message.data.data() + 4, &a, 4);
+  std::memcpy(message.data.data() + 8, &b, 4);
+  std::vector<std::uint8_t> png;
+  cv::imencode(".png", v, png);
+  message.data.insert(message.data.end(), png.begin(), png.end());
+  const cv::Mat mm = depthFromCompressed(message);
+  EXPECT_EQ(mm.at<std::uint16_t>(0, 0), 0);
+  for (int i = 1; i < 5; ++i) {
+    // Half a quantisation step, d^2 / a, plus the millimetre's rounding.
+    const double bound = 1000.0 * 0.5 * metres[i] * metres[i] / a + 0.5;
+    EXPECT_NEAR(mm.at<std::uint16_t>(0, i), 1000.0 * metres[i], bound) << metres[i];
+  }
+}
+
+TEST(Ros1CompressedImage, ColourAsPngIsExactAndAsJpegClose) {
+  const cv::Mat rgb = smoothColour(64, 48);
+  const sensor_msgs::CompressedImage png = compressedFromColour(rgb, "png");
+  EXPECT_EQ(png.format, "rgb8; png compressed bgr8");
+  EXPECT_EQ(cv::norm(colourFromCompressed(png), rgb, cv::NORM_INF), 0.0);
+  const cv::Mat from_jpeg = colourFromCompressed(compressedFromColour(rgb, "jpeg"));
+  ASSERT_EQ(from_jpeg.size(), rgb.size());
+  EXPECT_LT(meanAbsoluteError(from_jpeg, rgb), 3.0);  // R and B not swapped: that would be 40+
+  EXPECT_THROW(compressedFromColour(rgb, "bmp"), core::ConfigError);
+}
+
+TEST(Ros1CompressedImage, WhatCannotBeReadIsNamed) {
+  const auto message = [](const std::function<void()>& read) -> std::string {
+    try {
+      read();
+    } catch (const core::SourceError& e) {
+      return e.what();
+    }
+    return "";
+  };
+  sensor_msgs::CompressedImage depth = compressedFromDepth(randomDepth(16, 8, 3));
+  sensor_msgs::CompressedImage jpeg_depth = depth;
+  jpeg_depth.format = "16UC1; jpeg compressed mono16";
+  EXPECT_NE(message([&] { depthFromCompressed(jpeg_depth); }).find("not compressedDepth"),
+            std::string::npos);
+  sensor_msgs::CompressedImage wrong_encoding = depth;
+  wrong_encoding.format = "8UC1; compressedDepth png";
+  EXPECT_NE(message([&] { depthFromCompressed(wrong_encoding); }).find("'8UC1'"),
+            std::string::npos);
+  sensor_msgs::CompressedImage header_only = depth;
+  header_only.data.resize(12);
+  EXPECT_NE(message([&] { depthFromCompressed(header_only); }).find("RVL"), std::string::npos);
+  sensor_msgs::CompressedImage cut = depth;
+  cut.data.resize(40);
+  EXPECT_NE(message([&] { depthFromCompressed(cut); }).find("cut short"), std::string::npos);
+  sensor_msgs::CompressedImage colour = compressedFromColour(smoothColour(16, 8), "png");
+  colour.data.resize(30);
+  EXPECT_NE(message([&] { colourFromCompressed(colour); }).find("cannot be decoded"),
+            std::string::npos);
 }
 
 TEST(Ros1Image, CameraInfoCarriesTheIntrinsics) {

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <deque>
+#include <optional>
 
 #include <fmt/format.h>
 #include <geometry_msgs/PoseStamped.h>
@@ -13,6 +14,7 @@
 #include "internal/transform_tree.h"
 #include "tessera/core/error.h"
 #include "tessera/core/frame_pairing.h"
+#include "tessera/drivers/ros1/compressed_image.h"
 #include "tessera/drivers/ros1/ros_image.h"
 
 namespace tessera::drivers::ros1 {
@@ -33,9 +35,19 @@ std::string describeTopics(const std::map<std::string, TopicSummary>& topics) {
   return text.empty() ? " none" : text;
 }
 
+// Raw images or the compressed transports' (compressed_image.h).
 bool hasImageTopic(const std::map<std::string, TopicSummary>& topics, const std::string& name) {
   const auto it = topics.find(name);
-  return it != topics.end() && it->second.datatype == kImageType;
+  return it != topics.end() &&
+         (it->second.datatype == kImageType || it->second.datatype == kCompressedImageType);
+}
+
+// `raw` when the bag has it, else its compressed transport's topic when it has that.
+std::optional<std::string> imageTopicIn(const std::map<std::string, TopicSummary>& topics,
+                                        const std::string& raw, bool depth) {
+  if (hasImageTopic(topics, raw)) return raw;
+  if (hasImageTopic(topics, compressedTopic(raw, depth))) return compressedTopic(raw, depth);
+  return std::nullopt;
 }
 
 class BagSource : public core::FrameSource {
@@ -91,8 +103,9 @@ class BagSource : public core::FrameSource {
       RosTopics chosen = *options_.topics;
       for (const std::string* name : {&chosen.depth, &chosen.colour}) {
         if (!hasImageTopic(topics, *name)) {
-          throw core::SourceError(fmt::format("{}: no {} topic {}; the bag has:{}", path_.string(),
-                                              kImageType, *name, describeTopics(topics)));
+          throw core::SourceError(fmt::format("{}: no {} or {} topic {}; the bag has:{}",
+                                              path_.string(), kImageType, kCompressedImageType,
+                                              *name, describeTopics(topics)));
         }
       }
       if (!chosen.pose.empty() && !topics.count(chosen.pose)) {
@@ -105,8 +118,12 @@ class BagSource : public core::FrameSource {
       return chosen;
     }
     for (const RosTopics& known : {openniLaunchTopics(), tumTopics()}) {
-      if (hasImageTopic(topics, known.depth) && hasImageTopic(topics, known.colour)) {
+      const auto depth = imageTopicIn(topics, known.depth, true);
+      const auto colour = imageTopicIn(topics, known.colour, false);
+      if (depth && colour) {
         RosTopics chosen = known;
+        chosen.depth = *depth;
+        chosen.colour = *colour;
         if (!topics.count(chosen.pose)) chosen.pose.clear();
         return chosen;
       }
@@ -185,8 +202,16 @@ class BagSource : public core::FrameSource {
   // Decodes a depth or colour message into the pairing queues; a problem for a bad one.
   std::optional<std::string> take(const RawMessage& raw) {
     try {
-      const auto image = decode<sensor_msgs::Image>(raw);
       const bool depth = raw.topic == topics_.depth;
+      if (raw.datatype == kCompressedImageType) {
+        const auto image = decode<sensor_msgs::CompressedImage>(raw);
+        core::CapturedImage captured;
+        captured.stamp = static_cast<std::int64_t>(image.header.stamp.toNSec());
+        captured.image = depth ? depthFromCompressed(image) : colourFromCompressed(image);
+        queue(std::move(captured), depth, image.header.frame_id);
+        return std::nullopt;
+      }
+      const auto image = decode<sensor_msgs::Image>(raw);
       if (depth ? !readsDepthEncoding(image.encoding) : !readsColourEncoding(image.encoding)) {
         unreadable_ =
             fmt::format("{}: {} is in encoding '{}', which tessera does not read as {} ({})",
@@ -197,19 +222,22 @@ class BagSource : public core::FrameSource {
       }
       core::CapturedImage captured;
       captured.stamp = static_cast<std::int64_t>(image.header.stamp.toNSec());
-      if (depth) {
-        captured.image = depthFromImage(image);
-        depth_frame_id_ = image.header.frame_id;
-        pending_depth_.push_back(std::move(captured));
-      } else {
-        captured.image = colourFromImage(image);
-        std::lock_guard lock(inbox_.mutex);  // the inbox's rule; this source has one thread
-        inbox_.pushColour(std::move(captured));
-      }
+      captured.image = depth ? depthFromImage(image) : colourFromImage(image);
+      queue(std::move(captured), depth, image.header.frame_id);
       return std::nullopt;
     } catch (const core::SourceError& e) {
       return fmt::format("{} message recorded at {:.3f} s: {}", raw.topic,
                          static_cast<double>(raw.record_ns) * 1e-9, e.what());
+    }
+  }
+
+  void queue(core::CapturedImage captured, bool depth, const std::string& frame_id) {
+    if (depth) {
+      depth_frame_id_ = frame_id;
+      pending_depth_.push_back(std::move(captured));
+    } else {
+      std::lock_guard lock(inbox_.mutex);  // the inbox's rule; this source has one thread
+      inbox_.pushColour(std::move(captured));
     }
   }
 

@@ -9,6 +9,7 @@
 
 #include "internal/message_codec.h"
 #include "tessera/core/error.h"
+#include "tessera/drivers/ros1/compressed_image.h"
 #include "tessera/drivers/ros1/ros_image.h"
 
 namespace tessera::drivers::ros1 {
@@ -28,6 +29,14 @@ BagWriter::BagWriter(const std::filesystem::path& path, const BagWriterOptions& 
   const cv::Mat probe_colour(2, 2, CV_8UC3, cv::Scalar(1, 2, 3));
   imageFromDepth(probe_depth, options_.depth_encoding);
   imageFromColour(probe_colour, options_.colour_encoding);
+  if (!options_.compressed.empty()) {
+    compressedFromColour(probe_colour, options_.compressed);
+    if (options_.depth_encoding != "16UC1") {
+      throw core::ConfigError(
+          fmt::format("compressed bags carry 16UC1 depth (compressedDepth PNG), not {}",
+                      options_.depth_encoding));
+    }
+  }
   try {
     bag_->open(path.string(), rosbag::bagmode::Write);
     bag_->setCompression(options_.lz4 ? rosbag::compression::LZ4
@@ -50,29 +59,45 @@ void BagWriter::write(const core::Frame& frame) {
   const std::string& colour_frame =
       frame.colour_camera ? options_.colour_frame : options_.depth_frame;
   try {
-    sensor_msgs::Image depth = imageFromDepth(frame.depth_mm, options_.depth_encoding);
-    depth.header.seq = static_cast<std::uint32_t>(frames_);
-    depth.header.stamp = rosTime(frame.timestamp_ns);
-    depth.header.frame_id = options_.depth_frame;
+    std_msgs::Header depth_header;
+    depth_header.seq = static_cast<std::uint32_t>(frames_);
+    depth_header.stamp = rosTime(frame.timestamp_ns);
+    depth_header.frame_id = options_.depth_frame;
     sensor_msgs::CameraInfo depth_info = cameraInfoFromIntrinsics(frame.intrinsics);
-    depth_info.header = depth.header;
-    bag_->write(options_.topics.depth, recordTime(frame.timestamp_ns), depth);
+    depth_info.header = depth_header;
+    if (options_.compressed.empty()) {
+      sensor_msgs::Image depth = imageFromDepth(frame.depth_mm, options_.depth_encoding);
+      depth.header = depth_header;
+      bag_->write(options_.topics.depth, recordTime(frame.timestamp_ns), depth);
+    } else {
+      sensor_msgs::CompressedImage depth = compressedFromDepth(frame.depth_mm);
+      depth.header = depth_header;
+      bag_->write(compressedTopic(options_.topics.depth, true), recordTime(frame.timestamp_ns),
+                  depth);
+    }
     bag_->write(options_.topics.depth_info, recordTime(frame.timestamp_ns), depth_info);
 
-    sensor_msgs::Image colour = imageFromColour(frame.rgb, options_.colour_encoding);
-    colour.header.seq = depth.header.seq;
-    colour.header.stamp = rosTime(colour_ns);
-    colour.header.frame_id = colour_frame;
+    std_msgs::Header colour_header = depth_header;
+    colour_header.stamp = rosTime(colour_ns);
+    colour_header.frame_id = colour_frame;
     sensor_msgs::CameraInfo colour_info = cameraInfoFromIntrinsics(
         frame.colour_camera ? frame.colour_camera->intrinsics : frame.intrinsics);
-    colour_info.header = colour.header;
-    bag_->write(options_.topics.colour, recordTime(colour_ns), colour);
+    colour_info.header = colour_header;
+    if (options_.compressed.empty()) {
+      sensor_msgs::Image colour = imageFromColour(frame.rgb, options_.colour_encoding);
+      colour.header = colour_header;
+      bag_->write(options_.topics.colour, recordTime(colour_ns), colour);
+    } else {
+      sensor_msgs::CompressedImage colour = compressedFromColour(frame.rgb, options_.compressed);
+      colour.header = colour_header;
+      bag_->write(compressedTopic(options_.topics.colour, false), recordTime(colour_ns), colour);
+    }
     bag_->write(options_.topics.colour_info, recordTime(colour_ns), colour_info);
 
     if (frame.colour_camera && !wrote_static_) {
       // Where the colour camera sits in the depth camera's frame: T_D_RGB = T_RGB_D^-1.
       geometry_msgs::TransformStamped link;
-      link.header.stamp = depth.header.stamp;
+      link.header.stamp = depth_header.stamp;
       link.header.frame_id = options_.depth_frame;
       link.child_frame_id = options_.colour_frame;
       link.transform = transformFromIsometry(frame.colour_camera->T_RGB_D.inverse());
@@ -83,7 +108,7 @@ void BagWriter::write(const core::Frame& frame) {
     }
     if (frame.T_W_C_gt && !options_.topics.pose.empty()) {
       geometry_msgs::TransformStamped pose;
-      pose.header.stamp = depth.header.stamp;
+      pose.header.stamp = depth_header.stamp;
       pose.header.frame_id = options_.world_frame;
       pose.child_frame_id = options_.depth_frame;
       pose.transform = transformFromIsometry(*frame.T_W_C_gt);

@@ -12,12 +12,18 @@
 #include "tessera/core/clock.h"
 #include "tessera/core/error.h"
 #include "tessera/core/frame_pairing.h"
+#include "tessera/drivers/ros1/compressed_image.h"
 #include "tessera/drivers/ros1/ros_image.h"
 #include "tessera/drivers/ros1/ros_node.h"
 
 namespace tessera::drivers::ros1 {
 
 namespace {
+
+bool endsWith(const std::string& text, const std::string& suffix) {
+  return text.size() >= suffix.size() &&
+         text.compare(text.size() - suffix.size(), suffix.size(), suffix) == 0;
+}
 
 class RosSource : public core::FrameSource {
  public:
@@ -28,8 +34,18 @@ class RosSource : public core::FrameSource {
     inbox_.colour_capacity = 16;
     ros::NodeHandle node;
     const auto hints = ros::TransportHints().tcpNoDelay();
-    depth_ = node.subscribe(options_.topics.depth, 2, &RosSource::onDepth, this, hints);
-    colour_ = node.subscribe(options_.topics.colour, 4, &RosSource::onColour, this, hints);
+    // A topic of image_transport's compressed transports carries CompressedImage.
+    if (endsWith(options_.topics.depth, "/compressedDepth")) {
+      depth_ = node.subscribe(options_.topics.depth, 2, &RosSource::onCompressedDepth, this, hints);
+    } else {
+      depth_ = node.subscribe(options_.topics.depth, 2, &RosSource::onDepth, this, hints);
+    }
+    if (endsWith(options_.topics.colour, "/compressed")) {
+      colour_ =
+          node.subscribe(options_.topics.colour, 4, &RosSource::onCompressedColour, this, hints);
+    } else {
+      colour_ = node.subscribe(options_.topics.colour, 4, &RosSource::onColour, this, hints);
+    }
     if (!options_.intrinsics) {
       info_ = node.subscribe(options_.topics.depth_info, 1, &RosSource::onDepthInfo, this);
     }
@@ -80,16 +96,39 @@ class RosSource : public core::FrameSource {
   bool stopRequested() const { return options_.stop != nullptr && options_.stop->load(); }
 
   void onDepth(const sensor_msgs::ImageConstPtr& message) {
-    core::CapturedImage captured;
-    captured.arrival_ns = core::steadyNowNs();
-    captured.stamp = static_cast<std::int64_t>(message->header.stamp.toNSec());
-    captured.device_index = static_cast<int>(message->header.seq);
     if (!readsDepthEncoding(message->encoding)) {
       unreadable(options_.topics.depth, message->encoding, "depth", "16UC1, mono16, 32FC1");
       return;
     }
+    depthArrived(message->header, [&] { return depthFromImage(*message); });
+  }
+
+  void onCompressedDepth(const sensor_msgs::CompressedImageConstPtr& message) {
+    depthArrived(message->header, [&] { return depthFromCompressed(*message); });
+  }
+
+  void onColour(const sensor_msgs::ImageConstPtr& message) {
+    if (!readsColourEncoding(message->encoding)) {
+      unreadable(options_.topics.colour, message->encoding, "colour", readableColourEncodings());
+      return;
+    }
+    colourArrived(message->header, [&] { return colourFromImage(*message); });
+  }
+
+  void onCompressedColour(const sensor_msgs::CompressedImageConstPtr& message) {
+    colourArrived(message->header, [&] { return colourFromCompressed(*message); });
+  }
+
+  // A depth image decoded by `decode` (which throws core::SourceError for a bad one) into the
+  // inbox.
+  template <typename Decode>
+  void depthArrived(const std_msgs::Header& header, Decode decode) {
+    core::CapturedImage captured;
+    captured.arrival_ns = core::steadyNowNs();
+    captured.stamp = static_cast<std::int64_t>(header.stamp.toNSec());
+    captured.device_index = static_cast<int>(header.seq);
     try {
-      captured.image = depthFromImage(*message);
+      captured.image = decode();
     } catch (const core::SourceError& e) {
       warnOnce(fmt::format("{}: {}: {}", label_, options_.topics.depth, e.what()));
       return;
@@ -98,24 +137,20 @@ class RosSource : public core::FrameSource {
     // Images the publisher sent that never arrived (its queue or ours overflowed), where it
     // numbers them.
     std::size_t missed = 0;
-    if (last_seq_ && message->header.seq > *last_seq_ + 1 &&
-        message->header.seq - *last_seq_ < 1000) {
-      missed = message->header.seq - *last_seq_ - 1;
+    if (last_seq_ && header.seq > *last_seq_ + 1 && header.seq - *last_seq_ < 1000) {
+      missed = header.seq - *last_seq_ - 1;
     }
-    last_seq_ = message->header.seq;
+    last_seq_ = header.seq;
     inbox_.pushDepth(std::move(captured), missed);
   }
 
-  void onColour(const sensor_msgs::ImageConstPtr& message) {
+  template <typename Decode>
+  void colourArrived(const std_msgs::Header& header, Decode decode) {
     core::CapturedImage captured;
     captured.arrival_ns = core::steadyNowNs();
-    captured.stamp = static_cast<std::int64_t>(message->header.stamp.toNSec());
-    if (!readsColourEncoding(message->encoding)) {
-      unreadable(options_.topics.colour, message->encoding, "colour", readableColourEncodings());
-      return;
-    }
+    captured.stamp = static_cast<std::int64_t>(header.stamp.toNSec());
     try {
-      captured.image = colourFromImage(*message);
+      captured.image = decode();
     } catch (const core::SourceError& e) {
       warnOnce(fmt::format("{}: {}: {}", label_, options_.topics.colour, e.what()));
       return;

@@ -23,6 +23,10 @@ struct BagWriterOptions {
   std::string depth_frame = "camera_rgb_optical_frame";   // registered depth: the colour camera
   std::string colour_frame = "camera_rgb_optical_frame";  // a separate colour camera: its own
   bool lz4 = false;                                       // compress chunks
+  // "" writes raw images. "png" or "jpeg": image_transport's compressed topics instead, as
+  // robots record them: depth on DEPTH/compressedDepth (16UC1 PNG, lossless), colour on
+  // COLOUR/compressed in this format (compressed_image.h).
+  std::string compressed;
 };
 
 // Not thread-safe: one writer thread.

@@ -18,6 +18,10 @@ struct RosFramePublisherOptions {
   std::string depth_encoding = "16UC1";
   std::string colour_encoding = "rgb8";
   std::string frame_id = "camera_rgb_optical_frame";
+  // "" publishes raw images; "png" or "jpeg" image_transport's compressed topics instead
+  // (DEPTH/compressedDepth, COLOUR/compressed; compressed_image.h), as a robot's driver does
+  // for nodes on other machines.
+  std::string compressed;
 };
 
 class RosFramePublisher {
