@@ -2,6 +2,7 @@
 
 #include <chrono>
 #include <deque>
+#include <memory>
 #include <thread>
 
 #include <fmt/format.h>
@@ -35,8 +36,9 @@ CLI::App* addPlayCommand(CLI::App& app, PlayArguments& args) {
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
   play->add_flag("--preload", args.preload,
-                 "Read every frame into memory first, so that reading takes no CPU while "
-                 "publishing (a stand-in camera that costs what a driver costs)");
+                 "Read and encode every frame into memory first, so that reading and encoding "
+                 "take no CPU while publishing (a stand-in camera that costs what a driver on "
+                 "its own machine costs)");
   play->add_option("--depth-encoding", args.depth_encoding, "16UC1 millimetres or 32FC1 metres")
       ->check(CLI::IsMember({"16UC1", "32FC1"}))
       ->capture_default_str();
@@ -98,37 +100,46 @@ int playCommand(const PlayArguments& args) {
         }
       }
     };
-    std::deque<core::Frame> preloaded;
+    // Preloaded frames are encoded too (compressed images, the encodings): publishing them
+    // then costs the sending alone, as a camera driver on its own machine would.
+    struct Preloaded {
+      std::int64_t timestamp_ns;
+      std::shared_ptr<const drivers::ros1::RosFramePublisher::Encoded> messages;
+    };
+    std::deque<Preloaded> preloaded;
     if (args.preload) {
       const std::size_t limit = args.source_args.max_frames;
       while (limit == 0 || preloaded.size() < limit) {
         std::optional<core::Frame> frame = next();
         if (!frame) break;
-        preloaded.push_back(std::move(*frame));
+        preloaded.push_back({frame->timestamp_ns, publisher.encode(*frame)});
       }
-      spdlog::info("{}: {} frames read into memory", source->name(), preloaded.size());
+      spdlog::info("{}: {} frames read and encoded into memory", source->name(), preloaded.size());
     }
     ProgressLine progress;
     const auto start = std::chrono::steady_clock::now();
     std::optional<std::int64_t> first_stamp;
     std::size_t published = 0;
     while (!stop && (args.source_args.max_frames == 0 || published < args.source_args.max_frames)) {
-      std::optional<core::Frame> taken;
-      if (args.preload && !preloaded.empty()) {
-        taken = std::move(preloaded.front());
+      std::shared_ptr<const drivers::ros1::RosFramePublisher::Encoded> messages;
+      std::int64_t timestamp_ns = 0;
+      if (args.preload) {
+        if (preloaded.empty()) break;
+        timestamp_ns = preloaded.front().timestamp_ns;
+        messages = std::move(preloaded.front().messages);
         preloaded.pop_front();
-      } else if (!args.preload) {
-        taken = next();
+      } else {
+        std::optional<core::Frame> frame = next();
+        if (!frame) break;
+        timestamp_ns = frame->timestamp_ns;
+        messages = publisher.encode(*frame);
       }
-      if (!taken) break;
-      const core::Frame& frame = *taken;
-      if (!first_stamp) first_stamp = frame.timestamp_ns;
+      if (!first_stamp) first_stamp = timestamp_ns;
       // The recording's own pace: each frame leaves when its time since the first has passed.
-      const auto due =
-          start + std::chrono::nanoseconds(static_cast<std::int64_t>(
-                      static_cast<double>(frame.timestamp_ns - *first_stamp) / args.rate));
+      const auto due = start + std::chrono::nanoseconds(static_cast<std::int64_t>(
+                                   static_cast<double>(timestamp_ns - *first_stamp) / args.rate));
       std::this_thread::sleep_until(due);
-      publisher.publish(frame, drivers::ros1::RosFramePublisher::now());
+      publisher.publish(*messages, drivers::ros1::RosFramePublisher::now());
       ++published;
       const double elapsed =
           std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

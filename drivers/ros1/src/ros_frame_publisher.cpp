@@ -42,38 +42,67 @@ RosFramePublisher::~RosFramePublisher() {
   }
 }
 
-void RosFramePublisher::publish(const core::Frame& frame, std::int64_t stamp_ns) {
-  const std::int64_t colour_offset =
+// Raw or compressed images, as the options say; the headers are set when published.
+struct RosFramePublisher::Encoded {
+  std::int64_t colour_offset_ns = 0;
+  sensor_msgs::CameraInfo depth_info, colour_info;
+  sensor_msgs::Image depth, colour;
+  sensor_msgs::CompressedImage compressed_depth, compressed_colour;
+};
+
+std::shared_ptr<const RosFramePublisher::Encoded> RosFramePublisher::encode(
+    const core::Frame& frame) const {
+  auto encoded = std::make_shared<Encoded>();
+  encoded->colour_offset_ns =
       frame.colour_timestamp_ns ? *frame.colour_timestamp_ns - frame.timestamp_ns : 0;
+  encoded->depth_info = cameraInfoFromIntrinsics(frame.intrinsics);
+  encoded->colour_info = cameraInfoFromIntrinsics(
+      frame.colour_camera ? frame.colour_camera->intrinsics : frame.intrinsics);
+  if (options_.compressed.empty()) {
+    encoded->depth = imageFromDepth(frame.depth_mm, options_.depth_encoding);
+    encoded->colour = imageFromColour(frame.rgb, options_.colour_encoding);
+  } else {
+    encoded->compressed_depth = compressedFromDepth(frame.depth_mm);
+    encoded->compressed_colour = compressedFromColour(frame.rgb, options_.compressed);
+  }
+  return encoded;
+}
+
+void RosFramePublisher::publish(const core::Frame& frame, std::int64_t stamp_ns) {
+  publish(*encode(frame), stamp_ns);
+}
+
+void RosFramePublisher::publish(const Encoded& frame, std::int64_t stamp_ns) {
   std_msgs::Header header;
   header.seq = seq_++;
   header.stamp = rosTime(stamp_ns);
   header.frame_id = options_.frame_id;
-  sensor_msgs::CameraInfo info = cameraInfoFromIntrinsics(frame.intrinsics);
-  info.header = header;
   std_msgs::Header colour_header = header;
-  colour_header.stamp = rosTime(stamp_ns + colour_offset);
-  sensor_msgs::CameraInfo colour_info = cameraInfoFromIntrinsics(
-      frame.colour_camera ? frame.colour_camera->intrinsics : frame.intrinsics);
+  colour_header.stamp = rosTime(stamp_ns + frame.colour_offset_ns);
+  // The encoded messages are copied to take this publication's headers.
+  sensor_msgs::CameraInfo colour_info = frame.colour_info;
   colour_info.header = colour_header;
+  sensor_msgs::CameraInfo depth_info = frame.depth_info;
+  depth_info.header = header;
+  const bool compressed = !options_.compressed.empty();
   // Colour first: a subscriber pairs each depth image with colour that has already come.
   topics_->colour_info.publish(colour_info);
-  if (options_.compressed.empty()) {
-    sensor_msgs::Image colour = imageFromColour(frame.rgb, options_.colour_encoding);
+  if (compressed) {
+    sensor_msgs::CompressedImage colour = frame.compressed_colour;
     colour.header = colour_header;
     topics_->colour.publish(colour);
   } else {
-    sensor_msgs::CompressedImage colour = compressedFromColour(frame.rgb, options_.compressed);
+    sensor_msgs::Image colour = frame.colour;
     colour.header = colour_header;
     topics_->colour.publish(colour);
   }
-  topics_->depth_info.publish(info);
-  if (options_.compressed.empty()) {
-    sensor_msgs::Image depth = imageFromDepth(frame.depth_mm, options_.depth_encoding);
+  topics_->depth_info.publish(depth_info);
+  if (compressed) {
+    sensor_msgs::CompressedImage depth = frame.compressed_depth;
     depth.header = header;
     topics_->depth.publish(depth);
   } else {
-    sensor_msgs::CompressedImage depth = compressedFromDepth(frame.depth_mm);
+    sensor_msgs::Image depth = frame.depth;
     depth.header = header;
     topics_->depth.publish(depth);
   }

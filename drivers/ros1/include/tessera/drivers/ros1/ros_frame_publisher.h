@@ -31,9 +31,14 @@ class RosFramePublisher {
   explicit RosFramePublisher(const RosFramePublisherOptions& options);
   ~RosFramePublisher();
 
+  // A frame's messages, encoded once (for a stand-in camera that should cost only the sending).
+  struct Encoded;
+  std::shared_ptr<const Encoded> encode(const core::Frame& frame) const;
+
   // Publishes the frame stamped `stamp_ns` (the graph's time, ns); its colour image keeps its
   // own offset from the depth image.
   void publish(const core::Frame& frame, std::int64_t stamp_ns);
+  void publish(const Encoded& frame, std::int64_t stamp_ns);
   // The graph's time now, ns (wall time unless the graph runs on simulated time).
   static std::int64_t now();
   // Subscribers to the depth topic.
