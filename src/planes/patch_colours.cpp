@@ -75,6 +75,30 @@ bool smooth(const cv::Mat& rgb, int x, int y) {
   return true;
 }
 
+// Where `ray` (a pixel's, z = 1) meets the target's plane, when the measured depth confirms it
+// within `tolerance_m` + `tolerance_per_m2` z^2: its (u, v) (along the colour's own ray at its
+// own time, where that differs), view weight |cos| / distance^2 and distance.
+std::optional<PlanePixel> hitPlane(const ColourTarget& target, const Eigen::Vector3f& ray,
+                                   float measured, float tolerance_m, float tolerance_per_m2) {
+  const float along = target.n_C.dot(ray);
+  if (std::abs(along) < 1e-6F) return std::nullopt;
+  const float z = target.d_C / along;  // the ray meets the plane at depth z
+  if (z <= 0.0F) return std::nullopt;
+  if (std::abs(measured - z) > tolerance_m + tolerance_per_m2 * z * z) return std::nullopt;
+  Eigen::Vector3f offset = z * ray - target.origin_C;
+  const float ray_norm = ray.norm();
+  const float distance = z * ray_norm;
+  Eigen::Vector2f uv(offset.dot(target.u_C), offset.dot(target.v_C));
+  if (const auto& at = target.colour_plane) {
+    // The same pixel of the colour image looked along its ray at the colour's own time.
+    const float along_colour = at->n_C.dot(ray);
+    if (std::abs(along_colour) < 1e-6F) return std::nullopt;
+    offset = (at->d_C / along_colour) * ray - at->origin_C;
+    uv = {offset.dot(at->u_C), offset.dot(at->v_C)};
+  }
+  return PlanePixel{uv.x(), uv.y(), std::abs(along) / ray_norm / (distance * distance), distance};
+}
+
 }  // namespace
 
 std::optional<Eigen::Vector3f> PatchMap::addColours(
@@ -88,17 +112,12 @@ std::optional<Eigen::Vector3f> PatchMap::addColours(
   }
   const core::Isometry T_C_W = T_W_C.inverse();
   const core::Isometry T_Cc_W = T_W_C_colour.value_or(T_W_C).inverse();
-  std::vector<ColourTarget> targets(ids.size());
-  bool any = false;
-  for (std::size_t r = 0; r < ids.size(); ++r) {
-    const Patch* region = find(ids[r]);
-    if (region == nullptr) continue;
-    ColourTarget& target = targets[r];
-    const Plane& plane = planes_.at(region->plane);
+  // The target of `plane`, over the tiles `take` accepts; false when it has none.
+  const auto makeTarget = [&](const Plane& plane, ColourTarget& target, auto take) {
     for (Patch* tile : tilesOf(plane)) {
-      if (!tile->spilled_samples) target.tiles.push_back({tile->tile, tile});
+      if (!tile->spilled_samples && take(*tile)) target.tiles.push_back({tile->tile, tile});
     }
-    if (target.tiles.empty()) continue;
+    if (target.tiles.empty()) return false;
     const PlaneGeometry& geometry = *plane.geometry;
     target.grid = plane.grid;
     target.cell_m = config_.cell_m;
@@ -115,9 +134,48 @@ std::optional<Eigen::Vector3f> PatchMap::addColours(
           (T_Cc_W.linear() * geometry.u_axis).cast<float>(),
           (T_Cc_W.linear() * geometry.v_axis).cast<float>()};
     }
-    any = true;
+    return true;
+  };
+  std::vector<ColourTarget> targets(ids.size());
+  bool any = false;
+  for (std::size_t r = 0; r < ids.size(); ++r) {
+    const Patch* region = find(ids[r]);
+    if (region == nullptr) continue;
+    any =
+        makeTarget(planes_.at(region->plane), targets[r], [](const Patch&) { return true; }) || any;
   }
   if (!any) return std::nullopt;
+  // Planes near a region's own, within colour_neighbour_angle_deg and _offset_m (one surface
+  // fitted twice, as noisy depth does): the region's pixels also colour their growing tiles
+  // where the depth confirms them, so that each gets every view of the surface.
+  struct Neighbour {
+    std::uint8_t region = 0;
+    ColourTarget target;
+    cv::Mat sees, pixels;
+  };
+  std::vector<Neighbour> neighbours;
+  if (config_.colour_neighbour_angle_deg > 0.0) {
+    const double min_cos = std::cos(config_.colour_neighbour_angle_deg * M_PI / 180.0);
+    for (std::size_t r = 0; r < ids.size() && r < 255; ++r) {
+      if (targets[r].tiles.empty()) continue;
+      const Plane& own = planes_.at(find(ids[r])->plane);
+      for (const auto& [id, plane] : planes_) {
+        if (id == own.id || set_aside_.count(id) > 0) continue;
+        const PlaneGeometry& g = *plane.geometry;
+        if (g.normal.dot(own.geometry->normal) < min_cos ||
+            std::abs(g.normal.dot(own.geometry->origin) - g.offset) >
+                config_.colour_neighbour_offset_m) {
+          continue;
+        }
+        Neighbour neighbour;
+        neighbour.region = static_cast<std::uint8_t>(r);
+        if (makeTarget(plane, neighbour.target,
+                       [](const Patch& tile) { return !tile.finalized; })) {
+          neighbours.push_back(std::move(neighbour));
+        }
+      }
+    }
+  }
 
   // Pass one: the pixels whose measured depth confirms their patch's plane.
   const int scale = detection.scale;
@@ -125,6 +183,9 @@ std::optional<Eigen::Vector3f> PatchMap::addColours(
   cv::Mat plane_pixels(frame.rgb.size(), CV_32FC4);
   const auto tolerance_m = static_cast<float>(config_.colour_depth_tolerance_m);
   const auto tolerance_per_m2 = static_cast<float>(config_.colour_depth_tolerance_per_m2);
+  const auto hit = [&](const ColourTarget& target, const Eigen::Vector3f& ray, float measured) {
+    return hitPlane(target, ray, measured, tolerance_m, tolerance_per_m2);
+  };
   for (int y = 0; y < frame.rgb.rows; ++y) {
     const auto* label = detection.labels.ptr<std::uint8_t>(y / scale);
     const auto* depth = frame.depth_mm.ptr<std::uint16_t>(y);
@@ -134,32 +195,57 @@ std::optional<Eigen::Vector3f> PatchMap::addColours(
     for (int x = 0; x < frame.rgb.cols; ++x) {
       const std::uint8_t l = label[x / scale];
       if (l >= targets.size() || targets[l].tiles.empty() || depth[x] == 0) continue;
-      const ColourTarget& target = targets[l];
       const Eigen::Vector3f ray(static_cast<float>((x - k.cx) / k.fx), ray_y, 1.0F);
-      const float along = target.n_C.dot(ray);
-      if (std::abs(along) < 1e-6F) continue;
-      const float z = target.d_C / along;  // the ray meets the plane at depth z
-      if (z <= 0.0F) continue;
-      const float measured = static_cast<float>(depth[x]) * 1e-3F;
-      if (std::abs(measured - z) > tolerance_m + tolerance_per_m2 * z * z) continue;
-      Eigen::Vector3f offset = z * ray - target.origin_C;
-      const float ray_norm = ray.norm();
-      const float distance = z * ray_norm;
-      Eigen::Vector2f uv(offset.dot(target.u_C), offset.dot(target.v_C));
-      if (const auto& at = target.colour_plane) {
-        // The same pixel of the colour image looked along its ray at the colour's own time.
-        const float along_colour = at->n_C.dot(ray);
-        if (std::abs(along_colour) < 1e-6F) continue;
-        offset = (at->d_C / along_colour) * ray - at->origin_C;
-        uv = {offset.dot(at->u_C), offset.dot(at->v_C)};
-      }
-      out[x] = {uv.x(), uv.y(), std::abs(along) / ray_norm / (distance * distance), distance};
+      const auto pixel = hit(targets[l], ray, static_cast<float>(depth[x]) * 1e-3F);
+      if (!pixel) continue;
+      out[x] = *pixel;
       sees[x] = 255;
     }
   }
+  // ... and, for each neighbouring plane, the pixels of its region that confirm it inside its
+  // occupied cells.
+  std::vector<cv::Rect> region_box;  // per region label, its pixels' bounding box (full size)
+  if (!neighbours.empty()) {
+    region_box.assign(ids.size(), cv::Rect());
+    for (std::size_t r = 0; r < ids.size() && r < 255; ++r) {
+      cv::Rect box = cv::boundingRect(detection.labels == static_cast<int>(r));
+      region_box[r] =
+          cv::Rect(box.x * scale, box.y * scale, box.width * scale, box.height * scale) &
+          cv::Rect(0, 0, frame.rgb.cols, frame.rgb.rows);
+    }
+  }
+  for (Neighbour& neighbour : neighbours) {
+    neighbour.sees = cv::Mat::zeros(frame.rgb.size(), CV_8UC1);
+    neighbour.pixels.create(frame.rgb.size(), CV_32FC4);
+    const auto cell = static_cast<float>(config_.cell_m);
+    const cv::Rect& box = region_box[neighbour.region];
+    for (int y = box.y; y < box.y + box.height; ++y) {
+      const auto* label = detection.labels.ptr<std::uint8_t>(y / scale);
+      const auto* depth = frame.depth_mm.ptr<std::uint16_t>(y);
+      auto* sees = neighbour.sees.ptr<std::uint8_t>(y);
+      auto* out = neighbour.pixels.ptr<PlanePixel>(y);
+      const auto ray_y = static_cast<float>((y - k.cy) / k.fy);
+      for (int x = box.x; x < box.x + box.width; ++x) {
+        if (label[x / scale] != neighbour.region || depth[x] == 0) continue;
+        const Eigen::Vector3f ray(static_cast<float>((x - k.cx) / k.fx), ray_y, 1.0F);
+        const auto pixel = hit(neighbour.target, ray, static_cast<float>(depth[x]) * 1e-3F);
+        if (!pixel) continue;
+        const TileTarget* tile = neighbour.target.tileAt(pixel->u, pixel->v);
+        if (tile == nullptr ||
+            tile->patch->cells.count(Cell{static_cast<int>(std::floor(pixel->u / cell)),
+                                          static_cast<int>(std::floor(pixel->v / cell))}) == 0) {
+          continue;
+        }
+        out[x] = *pixel;
+        sees[x] = 255;
+      }
+    }
+  }
   if (const int margin = config_.colour_edge_margin_px; margin > 0) {
-    cv::erode(sees_plane, sees_plane,
-              cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * margin + 1, 2 * margin + 1)));
+    const cv::Mat square =
+        cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * margin + 1, 2 * margin + 1));
+    cv::erode(sees_plane, sees_plane, square);
+    for (Neighbour& neighbour : neighbours) cv::erode(neighbour.sees, neighbour.sees, square);
   }
 
   // The frame's gain against what the patches hold (every 2nd pixel each way is plenty).
@@ -186,6 +272,17 @@ std::optional<Eigen::Vector3f> PatchMap::addColours(
   // Pass two: the samples, weighted by their view and the frame's sharpness.
   const auto frame_weight = static_cast<float>(std::max(sharpness, 1e-6));
   const auto view = static_cast<std::int32_t>(frame.index);
+  const auto addSample = [&](TileTarget* tile, const PlanePixel& pixel, const cv::Vec3b& rgb) {
+    if (tile == nullptr) return;
+    std::array<std::uint8_t, 3> colour;
+    for (int c = 0; c < 3; ++c) {
+      colour[static_cast<std::size_t>(c)] =
+          cv::saturate_cast<std::uint8_t>(gain[c] * static_cast<float>(rgb[c]));
+    }
+    tile->patch->samples.add(pixel.u, pixel.v, colour, pixel.weight * frame_weight, view);
+    ++tile->pixels;
+    tile->distance_sum += pixel.distance;
+  };
   for (int y = 0; y < frame.rgb.rows; ++y) {
     const auto* label = detection.labels.ptr<std::uint8_t>(y / scale);
     const auto* sees = sees_plane.ptr<std::uint8_t>(y);
@@ -193,18 +290,21 @@ std::optional<Eigen::Vector3f> PatchMap::addColours(
     const auto* pixel = plane_pixels.ptr<PlanePixel>(y);
     for (int x = 0; x < frame.rgb.cols; ++x) {
       if (sees[x] == 0) continue;
-      TileTarget* tile = targets[label[x / scale]].tileAt(pixel[x].u, pixel[x].v);
-      if (tile == nullptr) continue;
-      std::array<std::uint8_t, 3> colour;
-      for (int c = 0; c < 3; ++c) {
-        colour[static_cast<std::size_t>(c)] =
-            cv::saturate_cast<std::uint8_t>(gain[c] * static_cast<float>(rgb[x][c]));
-      }
-      tile->patch->samples.add(pixel[x].u, pixel[x].v, colour, pixel[x].weight * frame_weight,
-                               view);
-      ++tile->pixels;
-      tile->distance_sum += pixel[x].distance;
+      addSample(targets[label[x / scale]].tileAt(pixel[x].u, pixel[x].v), pixel[x], rgb[x]);
     }
+  }
+  for (Neighbour& neighbour : neighbours) {
+    const cv::Rect& box = region_box[neighbour.region];
+    for (int y = box.y; y < box.y + box.height; ++y) {
+      const auto* sees = neighbour.sees.ptr<std::uint8_t>(y);
+      const auto* rgb = frame.rgb.ptr<cv::Vec3b>(y);
+      const auto* pixel = neighbour.pixels.ptr<PlanePixel>(y);
+      for (int x = box.x; x < box.x + box.width; ++x) {
+        if (sees[x] != 0)
+          addSample(neighbour.target.tileAt(pixel[x].u, pixel[x].v), pixel[x], rgb[x]);
+      }
+    }
+    targets.push_back(std::move(neighbour.target));  // settled with the regions' own below
   }
   const Eigen::Vector3d log_gain = gain.cast<double>().array().log();
   bool sampled = false;

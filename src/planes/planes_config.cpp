@@ -32,6 +32,8 @@ void readConfig(const core::ConfigSection& section, PlaneDetectorConfig& config)
 
 void readConfig(const core::ConfigSection& section, PatchMapConfig& config) {
   section.read("max_normal_angle_deg", config.max_normal_angle_deg);
+  section.read("colour_neighbour_angle_deg", config.colour_neighbour_angle_deg);
+  section.read("colour_neighbour_offset_m", config.colour_neighbour_offset_m);
   section.read("max_offset_m", config.max_offset_m);
   section.read("merge_bend_deg", config.merge_bend_deg);
   section.read("cell_m", config.cell_m);
@@ -61,6 +63,12 @@ void readConfig(const core::ConfigSection& section, PatchMapConfig& config) {
   }
   if (config.release_samples_after_frames < 0) {
     throw core::ConfigError("patches: release_samples_after_frames must be 0 (keep) or positive");
+  }
+  if (config.colour_neighbour_angle_deg < 0.0 || config.colour_neighbour_angle_deg >= 90.0 ||
+      config.colour_neighbour_offset_m < 0.0) {
+    throw core::ConfigError(
+        "patches: colour_neighbour_angle_deg must be 0 to under 90, colour_neighbour_offset_m "
+        "at least 0");
   }
   if (config.stable_frames < 1 || config.out_of_view_frames < 1 || config.max_growth < 0.0) {
     throw core::ConfigError(

@@ -1,5 +1,6 @@
 // Colours on real cameras: blended cells, a frame's exposure gain recovered where it overlaps
 // the patches, and pixels of something in front of a patch kept out of its colours.
+#include <algorithm>
 #include <random>
 
 #include <gtest/gtest.h>
@@ -163,6 +164,54 @@ TEST(PatchColours, ColourTakenAtAnotherPoseIsPlacedWithThatPose) {
   };
   EXPECT_LT(misplacedShare(T_W_colour), 0.03);
   EXPECT_GT(misplacedShare(std::nullopt), 0.1);
+}
+
+// One wall fitted twice, as noisy depth does: a second plane 8 degrees off it (beyond the 5 a
+// region continues a patch within) crosses it at x = 0. A frame of the wall whose region
+// continues the first plane colours the second too, but only where the wall's depth confirms
+// the second plane, near the crossing; with colour_neighbour_angle_deg 0 it does not.
+TEST(PatchColours, APlaneNearTheRegionsOwnIsColouredWhereTheDepthConfirmsIt) {
+  const core::Isometry T_W_C = core::Isometry::Identity();
+  const Eigen::Vector3d wall_n(0, 0, -1);
+  const Eigen::Vector3d tilted_n =
+      Eigen::AngleAxisd(8.0 * M_PI / 180.0, Eigen::Vector3d::UnitY()) * wall_n;
+  core::Frame wall = test::renderPlane(test::kinectIntrinsics(), T_W_C, wall_n, -2.0);
+  wall.rgb.setTo(cv::Scalar(200, 200, 200));
+  const core::Frame tilted = test::renderPlane(test::kinectIntrinsics(), T_W_C, tilted_n,
+                                               tilted_n.dot(Eigen::Vector3d(0, 0, 2)));
+  const PlaneDetector detector(PlaneDetectorConfig{});
+  const PlaneDetection wall_detection = detector.detect(wall);
+  const PlaneDetection tilted_detection = detector.detect(tilted);
+  ASSERT_EQ(wall_detection.planes.size(), 1u);
+  ASSERT_EQ(tilted_detection.planes.size(), 1u);
+  const auto samplesOnTilted = [&](double neighbour_angle_deg) {
+    PatchMapConfig config;
+    config.colour_neighbour_angle_deg = neighbour_angle_deg;
+    PatchMap map(config);
+    const std::vector<int> wall_ids = map.add(observationsOf(wall, wall_detection, T_W_C));
+    map.add(observationsOf(tilted, tilted_detection, T_W_C));
+    EXPECT_EQ(map.patches().size(), 2u) << "the tilted plane continued the wall";
+    map.addColours(wall, wall_detection, T_W_C, wall_ids);
+    const Patch& own = *std::find_if(map.patches().begin(), map.patches().end(),
+                                     [&](const Patch& p) { return p.id == wall_ids.front(); });
+    EXPECT_GT(own.samples.all().size(), 10000u);
+    std::vector<ColourSample> on_tilted;
+    for (const Patch& patch : map.patches()) {
+      if (patch.id == wall_ids.front()) continue;
+      const Patch::Frame plane = patch.planeFrame();
+      for (const ColourSample& s : patch.samples.all()) {
+        on_tilted.push_back(s);
+        // Near the crossing: the wall is within the colour depth tolerance (1 cm + 0.005 z^2,
+        // 3 cm at 2 m) of the tilted plane only for |x| up to 3 cm / tan 8 degrees, 21 cm.
+        const Eigen::Vector3d X = plane.origin + s.u * plane.u_axis + s.v * plane.v_axis;
+        EXPECT_LT(std::abs(X.x()), 0.23) << "coloured far from where the depth confirms it";
+        EXPECT_EQ(s.rgb, (std::array<std::uint8_t, 3>{200, 200, 200}));
+      }
+    }
+    return on_tilted.size();
+  };
+  EXPECT_GT(samplesOnTilted(15.0), 2000u);
+  EXPECT_EQ(samplesOnTilted(0.0), 0u);
 }
 
 }  // namespace

@@ -36,6 +36,10 @@ namespace tessera::planes {
 
 struct PatchMapConfig {
   double max_normal_angle_deg = 5.0;  // a region continues a patch only this close in normal
+  // A region's pixels also colour the growing tiles of planes this close to its own (normal,
+  // and offset at its plane's origin) where their depth confirms them (0: never).
+  double colour_neighbour_angle_deg = 15.0;
+  double colour_neighbour_offset_m = 0.10;
   double max_offset_m = 0.03;         // ... and with its centroid this close to its plane
   // After a loop closure, a plane merges into an older one it continues. One fit cannot follow
   // a floor that tracking drift bent over metres, so there the offset bound grows by
