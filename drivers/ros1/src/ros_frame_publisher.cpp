@@ -9,6 +9,17 @@
 
 namespace tessera::drivers::ros1 {
 
+namespace {
+
+// Publishes a copy of an encoded message with this publication's header.
+template <typename Message>
+void publishWith(const ros::Publisher& publisher, Message message, const std_msgs::Header& header) {
+  message.header = header;
+  publisher.publish(message);
+}
+
+}  // namespace
+
 struct RosFramePublisher::Topics {
   ros::Publisher depth, colour, depth_info, colour_info;
 };
@@ -79,32 +90,19 @@ void RosFramePublisher::publish(const Encoded& frame, std::int64_t stamp_ns) {
   header.frame_id = options_.frame_id;
   std_msgs::Header colour_header = header;
   colour_header.stamp = rosTime(stamp_ns + frame.colour_offset_ns);
-  // The encoded messages are copied to take this publication's headers.
-  sensor_msgs::CameraInfo colour_info = frame.colour_info;
-  colour_info.header = colour_header;
-  sensor_msgs::CameraInfo depth_info = frame.depth_info;
-  depth_info.header = header;
   const bool compressed = !options_.compressed.empty();
   // Colour first: a subscriber pairs each depth image with colour that has already come.
-  topics_->colour_info.publish(colour_info);
+  publishWith(topics_->colour_info, frame.colour_info, colour_header);
   if (compressed) {
-    sensor_msgs::CompressedImage colour = frame.compressed_colour;
-    colour.header = colour_header;
-    topics_->colour.publish(colour);
+    publishWith(topics_->colour, frame.compressed_colour, colour_header);
   } else {
-    sensor_msgs::Image colour = frame.colour;
-    colour.header = colour_header;
-    topics_->colour.publish(colour);
+    publishWith(topics_->colour, frame.colour, colour_header);
   }
-  topics_->depth_info.publish(depth_info);
+  publishWith(topics_->depth_info, frame.depth_info, header);
   if (compressed) {
-    sensor_msgs::CompressedImage depth = frame.compressed_depth;
-    depth.header = header;
-    topics_->depth.publish(depth);
+    publishWith(topics_->depth, frame.compressed_depth, header);
   } else {
-    sensor_msgs::Image depth = frame.depth;
-    depth.header = header;
-    topics_->depth.publish(depth);
+    publishWith(topics_->depth, frame.depth, header);
   }
 }
 
