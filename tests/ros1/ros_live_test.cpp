@@ -8,6 +8,7 @@
 #include <atomic>
 #include <chrono>
 #include <fstream>
+#include <memory>
 #include <mutex>
 #include <set>
 #include <thread>
@@ -112,20 +113,32 @@ struct Heard {
   std::string map_files;
 };
 
-TEST(Ros1Live, MapsTheOfficeFromTopicsAndPublishesPoseMarkersFiguresAndFiles) {
-  const fs::path office = test::sourceDir() / "recordings" / "office.oni";
-  if (std::string(TESSERA_ROSMASTER).empty()) GTEST_SKIP() << "rosmaster not found";
-  if (!fs::exists(office)) GTEST_SKIP() << office << " not rendered (the build renders it)";
-  const fs::path out = test::freshTempDir();
-  const int port = livePort();
-  const std::string master = fmt::format("localhost:{}", port);
+// What both tests need: rosmaster and tessera, the office's rendering, an output folder.
+class Ros1Live : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    if (std::string(TESSERA_ROSMASTER).empty()) GTEST_SKIP() << "rosmaster not found";
+    if (!fs::exists(office)) GTEST_SKIP() << office << " not rendered (the build renders it)";
+    out = test::freshTempDir();
+  }
+  // Starts rosmaster and joins its graph; false when it does not answer.
+  bool startMaster() {
+    rosmaster = std::make_unique<Child>(
+        std::vector<std::string>{TESSERA_ROSMASTER, "--core", "-p", std::to_string(livePort())});
+    return joinMaster(master);
+  }
 
+  const fs::path office = test::sourceDir() / "recordings" / "office.oni";
+  const std::string master = fmt::format("localhost:{}", livePort());
+  fs::path out;
+  std::unique_ptr<Child> rosmaster;
+};
+
+TEST_F(Ros1Live, MapsTheOfficeFromTopicsAndPublishesPoseMarkersFiguresAndFiles) {
   // The first 200 frames of the office, read before anything is timed.
   const std::vector<core::Frame> frames = firstFrames(office, 200);
   ASSERT_EQ(frames.size(), 200u);
-
-  Child rosmaster({TESSERA_ROSMASTER, "--core", "-p", std::to_string(port)});
-  ASSERT_TRUE(joinMaster(master)) << "rosmaster did not start";
+  ASSERT_TRUE(startMaster()) << "rosmaster did not start";
   Heard heard;
   ros::NodeHandle node;
   auto tf =
@@ -222,17 +235,10 @@ TEST(Ros1Live, MapsTheOfficeFromTopicsAndPublishesPoseMarkersFiguresAndFiles) {
 
 // A driver that publishes image_transport's compressed topics (for nodes on other machines):
 // tessera subscribes to them when named so, and maps what they carry.
-TEST(Ros1Live, MapsTheOfficeFromCompressedTopics) {
-  const fs::path office = test::sourceDir() / "recordings" / "office.oni";
-  if (std::string(TESSERA_ROSMASTER).empty()) GTEST_SKIP() << "rosmaster not found";
-  if (!fs::exists(office)) GTEST_SKIP() << office << " not rendered (the build renders it)";
-  const fs::path out = test::freshTempDir();
-  const int port = livePort();
-  const std::string master = fmt::format("localhost:{}", port);
+TEST_F(Ros1Live, MapsTheOfficeFromCompressedTopics) {
   const std::vector<core::Frame> frames = firstFrames(office, 90);
   ASSERT_EQ(frames.size(), 90u);
-  Child rosmaster({TESSERA_ROSMASTER, "--core", "-p", std::to_string(port)});
-  ASSERT_TRUE(joinMaster(master)) << "rosmaster did not start";
+  ASSERT_TRUE(startMaster()) << "rosmaster did not start";
   const RosTopics topics = openniLaunchTopics();
   Child tessera({TESSERA_BINARY, "run", "ros://" + master, "--out", out.string(), "--quiet",
                  "--frame-timeout", "1000", "--reconnect-timeout", "3", "--topic",
