@@ -21,12 +21,29 @@ wait_for_frames() {
   done
 }
 
+# Waits for the run $1 to exit (its status in $status), or fails after 120 s with its threads'
+# stacks (when gdb is there) so that a hang is a failure that says where, not a stuck test.
+wait_for_exit() {
+  i=0
+  while kill -0 "$1" 2>/dev/null; do
+    i=$((i + 1))
+    if [ $i -gt 1200 ]; then
+      echo "FAIL: $2: still running 120 s after the interrupt"
+      command -v gdb >/dev/null && gdb -p "$1" -batch -ex "thread apply all bt" 2>&1 | grep '^#'
+      kill -KILL "$1"
+      return 1
+    fi
+    sleep 0.1
+  done
+  wait "$1"
+  status=$?
+}
+
 "$tessera" run "$recording" "$@" --out "$out/once" >"$out/once.log" 2>&1 &
 pid=$!
-wait_for_frames "$out/once" "$stop_after" || exit 1
+wait_for_frames "$out/once" "$stop_after" || { kill -KILL $pid; exit 1; }
 kill -INT $pid
-wait $pid
-status=$?
+wait_for_exit $pid "one Ctrl-C" || { cat "$out/once.log"; exit 1; }
 cat "$out/once.log"
 [ $status -eq 0 ] || { echo "FAIL: one Ctrl-C: exit status $status"; exit 1; }
 for f in report.json mesh.ply patches.obj patches.json trajectory.txt textures.db; do
@@ -39,12 +56,11 @@ echo "frames before the stop: $frames"
 
 "$tessera" run "$recording" "$@" --out "$out/twice" >"$out/twice.log" 2>&1 &
 pid=$!
-wait_for_frames "$out/twice" "$stop_after" || exit 1
+wait_for_frames "$out/twice" "$stop_after" || { kill -KILL $pid; exit 1; }
 kill -INT $pid
 sleep 0.2
 kill -INT $pid
-wait $pid
-status=$?
+wait_for_exit $pid "two Ctrl-C" || exit 1
 [ $status -eq 130 ] || { echo "FAIL: two Ctrl-C: exit status $status"; exit 1; }
 "$tessera" db stats "$out/twice/textures.db" || { echo "FAIL: database unreadable"; exit 1; }
 echo "PASS"

@@ -1,5 +1,6 @@
 #include "scene_camera.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 
@@ -32,6 +33,8 @@ std::optional<CameraSettings> CameraSettings::fromEnvironment() {
   settings.fps = numberFromEnvironment("TESSERA_TEST_DEVICE_FPS");
   settings.unplug_at = integerFromEnvironment("TESSERA_TEST_DEVICE_UNPLUG_AT");
   settings.replug_ms = integerFromEnvironment("TESSERA_TEST_DEVICE_REPLUG_MS");
+  settings.plays = std::max(1, integerFromEnvironment("TESSERA_TEST_DEVICE_PLAYS").value_or(1));
+  settings.colour_until = integerFromEnvironment("TESSERA_TEST_DEVICE_COLOUR_UNTIL");
   return settings;
 }
 
@@ -76,7 +79,7 @@ std::optional<int> SceneCamera::nextFrame(bool& unplugged) {
     if (std::chrono::steady_clock::now() < *back_at_) return std::nullopt;
     back_at_.reset();
   }
-  if (next_ >= frame_count_) {
+  if (next_ >= frame_count_ * settings_.plays) {
     gone_for_good_ = unplugged = true;
     return std::nullopt;
   }
@@ -93,6 +96,19 @@ std::optional<int> SceneCamera::nextFrame(bool& unplugged) {
     return std::nullopt;
   }
   return next_++;
+}
+
+const RenderedFrame& SceneCamera::frame(int number) const {
+  // Played forth and back (0 .. n-1, n-2 .. 1, 0 ..), so that the camera never jumps.
+  const int period = std::max(1, 2 * (frame_count_ - 1));
+  const int k = number % period;
+  return frames_[static_cast<std::size_t>(k < frame_count_ ? k : period - k)];
+}
+
+std::uint64_t SceneCamera::timestampUs(int number) const {
+  if (number < frame_count_) return frames_[static_cast<std::size_t>(number)].timestamp_us;
+  return frames_.front().timestamp_us +
+         static_cast<std::uint64_t>(std::llround(number * 1e6 / mode_fps_));
 }
 
 bool SceneCamera::present() {

@@ -7,6 +7,10 @@
 //   TESSERA_TEST_DEVICE_FPS        delivery rate (default: the scene's, which the mode reports)
 //   TESSERA_TEST_DEVICE_UNPLUG_AT  frame index at which the device disappears (default: never)
 //   TESSERA_TEST_DEVICE_REPLUG_MS  how long it stays away (default: for good)
+//   TESSERA_TEST_DEVICE_PLAYS      times the frames are played, forth and back (default: 1), so
+//                                  that a long stream needs only a few frames rendered
+//   TESSERA_TEST_DEVICE_COLOUR_UNTIL  deliveries that carry colour (default: all); after them
+//                                  only depth comes, as from a device whose colour camera stalls
 // After its last frame the device disappears for good, so every live run ends.
 #include <chrono>
 #include <cstdint>
@@ -27,6 +31,8 @@ struct CameraSettings {
   std::optional<double> fps;
   std::optional<int> unplug_at;
   std::optional<int> replug_ms;
+  int plays = 1;
+  std::optional<int> colour_until;
 
   // Nothing when TESSERA_TEST_DEVICE_SCENE is unset.
   static std::optional<CameraSettings> fromEnvironment();
@@ -45,15 +51,19 @@ class SceneCamera {
 
   // Renders every frame on first use (the driver's deviceOpen), so that delivery keeps time.
   void renderIfNeeded();
-  const RenderedFrame& frame(int index) const { return frames_[static_cast<std::size_t>(index)]; }
-  int frameCount() const { return frame_count_; }
+  // Delivery `number` (0, 1, ...): the rendered frame it shows and its own time stamp.
+  const RenderedFrame& frame(int number) const;
+  std::uint64_t timestampUs(int number) const;
+  bool hasColour(int number) const {
+    return !settings_.colour_until || number < *settings_.colour_until;
+  }
   double fps() const { return fps_; }        // delivery rate
   int modeFps() const { return mode_fps_; }  // the scene's rate, as the mode says
   const core::Intrinsics& intrinsics() const { return intrinsics_; }
   bool colourRegistered() const { return colour_registered_; }
   std::string uri() const { return "tessera-test://" + scene_name_; }
 
-  // The frame to deliver next; nothing while unplugged or once every frame is out.
+  // The delivery number of the next frame; nothing while unplugged or once every frame is out.
   // `unplugged` is set when this call is the moment the device goes away.
   std::optional<int> nextFrame(bool& unplugged);
   // True unless unplugged; a replugged device resumes where the scene has got to meanwhile.

@@ -220,11 +220,13 @@ class SceneDevice : public oni::driver::DeviceBase {
       }
       if (!index) return;
       const tessera::test::RenderedFrame& frame = camera_.frame(*index);
+      const std::uint64_t timestamp_us = camera_.timestampUs(*index);
       std::lock_guard lock(streams_mutex_);
       for (const auto& stream : streams_) {
         if (!stream->started()) continue;
+        if (stream->type() != ONI_SENSOR_DEPTH && !camera_.hasColour(*index)) continue;
         stream->deliver(stream->type() == ONI_SENSOR_DEPTH ? frame.depth_mm : frame.rgb, *index,
-                        frame.timestamp_us);
+                        timestamp_us);
       }
     }
   }

@@ -2,6 +2,7 @@
 // tessera, publishes the office as a camera driver would (stopping once midway, as a driver
 // that restarts), and checks what tessera publishes back with its own subscribers.
 #include <signal.h>
+#include <sys/prctl.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -41,6 +42,9 @@ class Child {
   explicit Child(std::vector<std::string> argv) {
     pid_ = fork();
     if (pid_ == 0) {
+      // Killed with the test too: a test that ctest times out must leave no rosmaster behind
+      // holding its output open.
+      prctl(PR_SET_PDEATHSIG, SIGKILL);
       std::vector<char*> args;
       for (std::string& a : argv) args.push_back(a.data());
       args.push_back(nullptr);

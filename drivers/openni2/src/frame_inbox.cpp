@@ -25,6 +25,12 @@ void InboxListener::onNewFrame(openni::VideoStream& stream) {
 }
 
 void InboxListener::take(openni::VideoStream& stream) {
+  // A callback may find nothing to read: its frame was taken along with an earlier one, or the
+  // streams are stopping. readFrame would then wait for the next frame, which never comes once
+  // the device has gone, and closing the device would wait on this callback for ever.
+  openni::VideoStream* streams[] = {&stream};
+  int ready = -1;
+  if (openni::OpenNI::waitForAnyStream(streams, 1, &ready, 0) != openni::STATUS_OK) return;
   openni::VideoFrameRef ref;
   if (stream.readFrame(&ref) != openni::STATUS_OK || !ref.isValid()) return;
   core::CapturedImage frame;

@@ -178,8 +178,10 @@ void OpenNi2Source::State::connect() {
       c->device.isImageRegistrationModeSupported(openni::IMAGE_REGISTRATION_DEPTH_TO_COLOR) &&
       c->device.setImageRegistrationMode(openni::IMAGE_REGISTRATION_DEPTH_TO_COLOR) ==
           openni::STATUS_OK;
-  // Sync is a hint: pairing by timestamp below works without it.
-  c->device.setDepthColorSyncEnabled(true);
+  // No depth/colour sync: frames are paired by time stamp below. OpenNI2 builds its synced
+  // group from the streams already started when one starts, so with the two started one after
+  // the other it held the depth stream alone; and each start and stop swaps the streams' frame
+  // holders while their callbacks may be reading.
 
   if (options.intrinsics) {
     intrinsics = *options.intrinsics;
