@@ -12,6 +12,7 @@
 #include "stop_request.h"
 #include "tessera/core/error.h"
 #ifdef TESSERA_HAVE_ROS1
+#include "tessera/drivers/ros1/compressed_image.h"
 #include "tessera/drivers/ros1/ros_frame_publisher.h"
 #endif
 
@@ -84,7 +85,9 @@ int playCommand(const PlayArguments& args) {
     }
     if (publisher.subscribers() == 0) {
       spdlog::warn("{}: nobody subscribes to {}; publishing anyway", args.target,
-                   options.topics.depth);
+                   options.compressed.empty()
+                       ? options.topics.depth
+                       : drivers::ros1::compressedTopic(options.topics.depth, true));
     }
     // The frames to publish, in order: read as they are published, or all before.
     std::size_t read = 0;

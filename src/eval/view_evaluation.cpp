@@ -209,6 +209,13 @@ ViewEvaluation evaluateViews(const std::vector<ViewModel>& models, core::FrameSo
     if (T_W_C.size() < models.size()) continue;
     if (frame.colour_camera) frame = core::withRegisteredColour(std::move(frame));
     if (frame.rgb.empty() || frame.depth_mm.empty()) continue;
+    // Renders are the intrinsics' size; a frame of another size cannot be compared with them.
+    const cv::Size size(frame.intrinsics.width, frame.intrinsics.height);
+    if (frame.rgb.size() != size || frame.depth_mm.size() != size) {
+      spdlog::warn("{}: frame {} is {}x{}, not the intrinsics' {}x{}: not scored", frames.name(),
+                   frame.index, frame.rgb.cols, frame.rgb.rows, size.width, size.height);
+      continue;
+    }
 
     std::vector<ViewImage> renders;
     for (std::size_t m = 0; m < models.size(); ++m) {

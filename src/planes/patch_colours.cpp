@@ -99,6 +99,28 @@ std::optional<PlanePixel> hitPlane(const ColourTarget& target, const Eigen::Vect
   return PlanePixel{uv.x(), uv.y(), std::abs(along) / ray_norm / (distance * distance), distance};
 }
 
+// Whether the rectangle of `plane`'s cells can show inside `box` (pixels) to the camera at
+// T_C_W: the bounding box of its corners' projections holds all it covers. A rectangle that
+// reaches behind the camera may show anywhere, so it counts.
+bool boundsMayMeet(const Plane& plane, double cell_m, const core::Isometry& T_C_W,
+                   const core::Intrinsics& k, const cv::Rect& box) {
+  const PlaneGeometry& g = *plane.geometry;
+  const double u[2] = {plane.lo.first * cell_m, (plane.hi.first + 1) * cell_m};
+  const double v[2] = {plane.lo.second * cell_m, (plane.hi.second + 1) * cell_m};
+  double x_lo = INFINITY, x_hi = -INFINITY, y_lo = INFINITY, y_hi = -INFINITY;
+  for (const double cu : u) {
+    for (const double cv : v) {
+      const Eigen::Vector3d X_C = T_C_W * (g.origin + cu * g.u_axis + cv * g.v_axis);
+      if (X_C.z() < 1e-3) return true;
+      const double x = k.fx * X_C.x() / X_C.z() + k.cx;
+      const double y = k.fy * X_C.y() / X_C.z() + k.cy;
+      x_lo = std::min(x_lo, x), x_hi = std::max(x_hi, x);
+      y_lo = std::min(y_lo, y), y_hi = std::max(y_hi, y);
+    }
+  }
+  return x_hi >= box.x && x_lo <= box.x + box.width && y_hi >= box.y && y_lo <= box.y + box.height;
+}
+
 }  // namespace
 
 std::optional<Eigen::Vector3f> PatchMap::addColours(
@@ -147,28 +169,41 @@ std::optional<Eigen::Vector3f> PatchMap::addColours(
   if (!any) return std::nullopt;
   // Planes near a region's own, within colour_neighbour_angle_deg and _offset_m (one surface
   // fitted twice, as noisy depth does): the region's pixels also colour their growing tiles
-  // where the depth confirms them, so that each gets every view of the surface.
+  // where the depth confirms them, so that each gets every view of the surface. Only planes
+  // whose cells can be in the region's box count: a floor is near every other floor of the map.
+  const int scale = detection.scale;
+  const int margin = std::max(config_.colour_edge_margin_px, 0);
   struct Neighbour {
     std::uint8_t region = 0;
     ColourTarget target;
+    cv::Rect area;  // the region's box and the edge margin, in the frame: sees and pixels
     cv::Mat sees, pixels;
   };
   std::vector<Neighbour> neighbours;
   if (config_.colour_neighbour_angle_deg > 0.0) {
     const double min_cos = std::cos(config_.colour_neighbour_angle_deg * M_PI / 180.0);
+    const cv::Rect image(0, 0, frame.rgb.cols, frame.rgb.rows);
     for (std::size_t r = 0; r < ids.size() && r < 255; ++r) {
       if (targets[r].tiles.empty()) continue;
+      const cv::Rect low = cv::boundingRect(detection.labels == static_cast<int>(r));
+      const cv::Rect box =
+          cv::Rect(low.x * scale, low.y * scale, low.width * scale, low.height * scale) & image;
+      if (box.empty()) continue;
       const Plane& own = planes_.at(find(ids[r])->plane);
       for (const auto& [id, plane] : planes_) {
-        if (id == own.id || set_aside_.count(id) > 0) continue;
+        if (id == own.id || set_aside_.count(id) > 0 || !plane.has_cells) continue;
         const PlaneGeometry& g = *plane.geometry;
         if (g.normal.dot(own.geometry->normal) < min_cos ||
             std::abs(g.normal.dot(own.geometry->origin) - g.offset) >
-                config_.colour_neighbour_offset_m) {
+                config_.colour_neighbour_offset_m ||
+            !boundsMayMeet(plane, config_.cell_m, T_C_W, k, box)) {
           continue;
         }
         Neighbour neighbour;
         neighbour.region = static_cast<std::uint8_t>(r);
+        neighbour.area = cv::Rect(box.x - margin, box.y - margin, box.width + 2 * margin,
+                                  box.height + 2 * margin) &
+                         image;
         if (makeTarget(plane, neighbour.target,
                        [](const Patch& tile) { return !tile.finalized; })) {
           neighbours.push_back(std::move(neighbour));
@@ -178,7 +213,6 @@ std::optional<Eigen::Vector3f> PatchMap::addColours(
   }
 
   // Pass one: the pixels whose measured depth confirms their patch's plane.
-  const int scale = detection.scale;
   cv::Mat sees_plane = cv::Mat::zeros(frame.rgb.size(), CV_8UC1);
   cv::Mat plane_pixels(frame.rgb.size(), CV_32FC4);
   const auto tolerance_m = static_cast<float>(config_.colour_depth_tolerance_m);
@@ -203,29 +237,20 @@ std::optional<Eigen::Vector3f> PatchMap::addColours(
     }
   }
   // ... and, for each neighbouring plane, the pixels of its region that confirm it inside its
-  // occupied cells.
-  std::vector<cv::Rect> region_box;  // per region label, its pixels' bounding box (full size)
-  if (!neighbours.empty()) {
-    region_box.assign(ids.size(), cv::Rect());
-    for (std::size_t r = 0; r < ids.size() && r < 255; ++r) {
-      cv::Rect box = cv::boundingRect(detection.labels == static_cast<int>(r));
-      region_box[r] =
-          cv::Rect(box.x * scale, box.y * scale, box.width * scale, box.height * scale) &
-          cv::Rect(0, 0, frame.rgb.cols, frame.rgb.rows);
-    }
-  }
+  // occupied cells (a neighbour none confirms is dropped).
+  const auto cell = static_cast<float>(config_.cell_m);
   for (Neighbour& neighbour : neighbours) {
-    neighbour.sees = cv::Mat::zeros(frame.rgb.size(), CV_8UC1);
-    neighbour.pixels.create(frame.rgb.size(), CV_32FC4);
-    const auto cell = static_cast<float>(config_.cell_m);
-    const cv::Rect& box = region_box[neighbour.region];
-    for (int y = box.y; y < box.y + box.height; ++y) {
+    const cv::Rect& area = neighbour.area;
+    neighbour.sees = cv::Mat::zeros(area.size(), CV_8UC1);
+    neighbour.pixels.create(area.size(), CV_32FC4);
+    bool confirmed = false;
+    for (int y = area.y; y < area.y + area.height; ++y) {
       const auto* label = detection.labels.ptr<std::uint8_t>(y / scale);
       const auto* depth = frame.depth_mm.ptr<std::uint16_t>(y);
-      auto* sees = neighbour.sees.ptr<std::uint8_t>(y);
-      auto* out = neighbour.pixels.ptr<PlanePixel>(y);
+      auto* sees = neighbour.sees.ptr<std::uint8_t>(y - area.y);
+      auto* out = neighbour.pixels.ptr<PlanePixel>(y - area.y);
       const auto ray_y = static_cast<float>((y - k.cy) / k.fy);
-      for (int x = box.x; x < box.x + box.width; ++x) {
+      for (int x = area.x; x < area.x + area.width; ++x) {
         if (label[x / scale] != neighbour.region || depth[x] == 0) continue;
         const Eigen::Vector3f ray(static_cast<float>((x - k.cx) / k.fx), ray_y, 1.0F);
         const auto pixel = hit(neighbour.target, ray, static_cast<float>(depth[x]) * 1e-3F);
@@ -236,12 +261,17 @@ std::optional<Eigen::Vector3f> PatchMap::addColours(
                                           static_cast<int>(std::floor(pixel->v / cell))}) == 0) {
           continue;
         }
-        out[x] = *pixel;
-        sees[x] = 255;
+        out[x - area.x] = *pixel;
+        sees[x - area.x] = 255;
+        confirmed = true;
       }
     }
+    if (!confirmed) neighbour.sees.release();
   }
-  if (const int margin = config_.colour_edge_margin_px; margin > 0) {
+  std::erase_if(neighbours, [](const Neighbour& n) { return n.sees.empty(); });
+  if (margin > 0) {
+    // Each neighbour's area reaches `margin` beyond its region's box (or to the frame's edge),
+    // so eroding it alone removes what eroding the whole frame would.
     const cv::Mat square =
         cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * margin + 1, 2 * margin + 1));
     cv::erode(sees_plane, sees_plane, square);
@@ -294,14 +324,14 @@ std::optional<Eigen::Vector3f> PatchMap::addColours(
     }
   }
   for (Neighbour& neighbour : neighbours) {
-    const cv::Rect& box = region_box[neighbour.region];
-    for (int y = box.y; y < box.y + box.height; ++y) {
-      const auto* sees = neighbour.sees.ptr<std::uint8_t>(y);
+    const cv::Rect& area = neighbour.area;
+    for (int y = area.y; y < area.y + area.height; ++y) {
+      const auto* sees = neighbour.sees.ptr<std::uint8_t>(y - area.y);
       const auto* rgb = frame.rgb.ptr<cv::Vec3b>(y);
-      const auto* pixel = neighbour.pixels.ptr<PlanePixel>(y);
-      for (int x = box.x; x < box.x + box.width; ++x) {
-        if (sees[x] != 0)
-          addSample(neighbour.target.tileAt(pixel[x].u, pixel[x].v), pixel[x], rgb[x]);
+      const auto* pixel = neighbour.pixels.ptr<PlanePixel>(y - area.y);
+      for (int x = area.x; x < area.x + area.width; ++x) {
+        const PlanePixel& at = pixel[x - area.x];
+        if (sees[x - area.x] != 0) addSample(neighbour.target.tileAt(at.u, at.v), at, rgb[x]);
       }
     }
     targets.push_back(std::move(neighbour.target));  // settled with the regions' own below

@@ -9,7 +9,7 @@ tessera=$1 recording=$2 out=$3 total=$4 stop_after=$5
 shift 5
 rm -rf "$out" && mkdir -p "$out"
 
-# Waits until the run's stats.jsonl has $2 frame lines, or fails after 60 s.
+# Waits until the run's stats.jsonl has $2 frame lines, or fails after 120 s.
 wait_for_frames() {
   i=0
   while :; do
@@ -60,7 +60,7 @@ wait_for_frames "$out/twice" "$stop_after" || { kill -KILL $pid; exit 1; }
 kill -INT $pid
 sleep 0.2
 kill -INT $pid
-wait_for_exit $pid "two Ctrl-C" || exit 1
+wait_for_exit $pid "two Ctrl-C" || { cat "$out/twice.log"; exit 1; }
 [ $status -eq 130 ] || { echo "FAIL: two Ctrl-C: exit status $status"; exit 1; }
 "$tessera" db stats "$out/twice/textures.db" || { echo "FAIL: database unreadable"; exit 1; }
 echo "PASS"

@@ -43,6 +43,7 @@ SceneCamera::SceneCamera(CameraSettings settings) : settings_(std::move(settings
   scene_name_ = scene.name;
   frame_count_ = std::min(settings_.frames.value_or(scene.frames), scene.frames);
   fps_ = settings_.fps.value_or(scene.fps);
+  scene_fps_ = scene.fps;
   mode_fps_ = static_cast<int>(std::lround(scene.fps));
   intrinsics_ = scene.sensor.intrinsics;
   colour_registered_ = scene.sensor.colour_registered;
@@ -107,8 +108,9 @@ const RenderedFrame& SceneCamera::frame(int number) const {
 
 std::uint64_t SceneCamera::timestampUs(int number) const {
   if (number < frame_count_) return frames_[static_cast<std::size_t>(number)].timestamp_us;
-  return frames_.front().timestamp_us +
-         static_cast<std::uint64_t>(std::llround(number * 1e6 / mode_fps_));
+  // Later plays go on at the scene's own rate from its last frame.
+  return frames_.back().timestamp_us +
+         static_cast<std::uint64_t>(std::llround((number - frame_count_ + 1) * 1e6 / scene_fps_));
 }
 
 bool SceneCamera::present() {

@@ -77,6 +77,7 @@ class SceneCamera {
   std::vector<RenderedFrame> frames_;
   int frame_count_ = 0;
   double fps_ = 30.0;
+  double scene_fps_ = 30.0;
   int mode_fps_ = 30;
   core::Intrinsics intrinsics_;
   bool colour_registered_ = true;

@@ -185,33 +185,77 @@ TEST(Ros1CompressedImage, ColourAsPngIsExactAndAsJpegClose) {
   EXPECT_THROW(compressedFromColour(rgb, "bmp"), core::ConfigError);
 }
 
+// What `read` throws as core::SourceError; empty when it throws nothing.
+std::string sourceErrorOf(const std::function<void()>& read) {
+  try {
+    read();
+  } catch (const core::SourceError& e) {
+    return e.what();
+  }
+  return "";
+}
+
 TEST(Ros1CompressedImage, WhatCannotBeReadIsNamed) {
-  const auto message = [](const std::function<void()>& read) -> std::string {
-    try {
-      read();
-    } catch (const core::SourceError& e) {
-      return e.what();
-    }
-    return "";
-  };
   sensor_msgs::CompressedImage depth = compressedFromDepth(randomDepth(16, 8, 3));
   sensor_msgs::CompressedImage jpeg_depth = depth;
   jpeg_depth.format = "16UC1; jpeg compressed mono16";
-  EXPECT_NE(message([&] { depthFromCompressed(jpeg_depth); }).find("not compressedDepth"),
+  EXPECT_NE(sourceErrorOf([&] { depthFromCompressed(jpeg_depth); }).find("not compressedDepth"),
             std::string::npos);
   sensor_msgs::CompressedImage wrong_encoding = depth;
   wrong_encoding.format = "8UC1; compressedDepth png";
-  EXPECT_NE(message([&] { depthFromCompressed(wrong_encoding); }).find("'8UC1'"),
+  EXPECT_NE(sourceErrorOf([&] { depthFromCompressed(wrong_encoding); }).find("'8UC1'"),
             std::string::npos);
   sensor_msgs::CompressedImage header_only = depth;
   header_only.data.resize(12);
-  EXPECT_NE(message([&] { depthFromCompressed(header_only); }).find("RVL"), std::string::npos);
+  EXPECT_NE(sourceErrorOf([&] { depthFromCompressed(header_only); }).find("RVL"),
+            std::string::npos);
   sensor_msgs::CompressedImage cut = depth;
   cut.data.resize(40);
-  EXPECT_NE(message([&] { depthFromCompressed(cut); }).find("cut short"), std::string::npos);
+  EXPECT_NE(sourceErrorOf([&] { depthFromCompressed(cut); }).find("cut short"), std::string::npos);
   sensor_msgs::CompressedImage colour = compressedFromColour(smoothColour(16, 8), "png");
   colour.data.resize(30);
-  EXPECT_NE(message([&] { colourFromCompressed(colour); }).find("cannot be decoded"),
+  EXPECT_NE(sourceErrorOf([&] { colourFromCompressed(colour); }).find("cannot be decoded"),
+            std::string::npos);
+}
+
+// image_transport's PNG keeps a Bayer image as its mosaic: it is demosaicked as a raw one is.
+TEST(Ros1CompressedImage, ABayerMosaicAsPngIsDemosaicked) {
+  const cv::Mat rgb = smoothColour(96, 64);
+  const sensor_msgs::Image raw = imageFromColour(rgb, "bayer_grbg8");
+  const cv::Mat mosaic(static_cast<int>(raw.height), static_cast<int>(raw.width), CV_8UC1,
+                       const_cast<std::uint8_t*>(raw.data.data()), raw.step);
+  sensor_msgs::CompressedImage png;
+  png.format = "bayer_grbg8; png compressed ";
+  cv::imencode(".png", mosaic, png.data);
+  EXPECT_EQ(cv::norm(colourFromCompressed(png), colourFromImage(raw), cv::NORM_INF), 0.0);
+}
+
+// A corrupt or hostile header must not make the decoder allocate what it claims.
+TEST(Ros1CompressedImage, AHugeDeclaredSizeIsRefusedBeforeDecoding) {
+  const auto putBigEndian = [](std::vector<std::uint8_t>& data, std::size_t at, std::uint32_t v,
+                               int bytes) {
+    for (int i = bytes - 1; i >= 0; --i, v >>= 8) data[at + static_cast<std::size_t>(i)] = v & 0xFF;
+  };
+  sensor_msgs::CompressedImage depth = compressedFromDepth(randomDepth(16, 8, 3));
+  putBigEndian(depth.data, 12 + 16, 60000, 4);  // the PNG's IHDR width and height
+  putBigEndian(depth.data, 12 + 20, 60000, 4);
+  EXPECT_NE(sourceErrorOf([&] { depthFromCompressed(depth); }).find("declares 60000 x 60000"),
+            std::string::npos);
+
+  sensor_msgs::CompressedImage jpeg = compressedFromColour(smoothColour(16, 8), "jpeg");
+  std::size_t sof = 2;
+  while (sof + 1 < jpeg.data.size() && !(jpeg.data[sof] == 0xFF && jpeg.data[sof + 1] == 0xC0))
+    ++sof;
+  ASSERT_LT(sof + 9, jpeg.data.size()) << "no baseline start-of-frame segment";
+  putBigEndian(jpeg.data, sof + 5, 40000, 2);  // height, then width
+  putBigEndian(jpeg.data, sof + 7, 30000, 2);
+  EXPECT_NE(sourceErrorOf([&] { colourFromCompressed(jpeg); }).find("declares 30000 x 40000"),
+            std::string::npos);
+
+  sensor_msgs::CompressedImage bmp;
+  bmp.format = "rgb8; bmp compressed bgr8";
+  bmp.data = {'B', 'M', 0, 0, 0, 0, 0, 0};
+  EXPECT_NE(sourceErrorOf([&] { colourFromCompressed(bmp); }).find("not a PNG or JPEG"),
             std::string::npos);
 }
 

@@ -4,12 +4,15 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <optional>
+#include <utility>
 
 #include <fmt/format.h>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "tessera/core/error.h"
+#include "tessera/drivers/ros1/ros_image.h"
 
 namespace tessera::drivers::ros1 {
 
@@ -34,10 +37,72 @@ std::string encodingOf(const std::string& format) {
   return first == std::string::npos ? "" : head.substr(first, last - first + 1);
 }
 
+std::uint32_t bigEndian(const std::uint8_t* p, int bytes) {
+  std::uint32_t value = 0;
+  for (int i = 0; i < bytes; ++i) value = (value << 8) | p[i];
+  return value;
+}
+
+// The size a PNG (its IHDR chunk) or JPEG (its start-of-frame segment) at `offset` declares;
+// nothing for anything else or when the header is cut short.
+std::optional<std::pair<std::uint32_t, std::uint32_t>> declaredSize(
+    const std::vector<std::uint8_t>& data, std::size_t offset) {
+  const std::uint8_t* p = data.data() + offset;
+  const std::size_t n = data.size() - offset;
+  if (pngAt(data, offset)) {
+    if (n < 24 || std::memcmp(p + 12, "IHDR", 4) != 0) return std::nullopt;
+    return std::pair{bigEndian(p + 16, 4), bigEndian(p + 20, 4)};
+  }
+  if (n < 4 || p[0] != 0xFF || p[1] != 0xD8) return std::nullopt;
+  // JPEG segments: FF, marker, then (but for the markers without one) a 2-byte length.
+  std::size_t at = 2;
+  while (at + 4 <= n) {
+    if (p[at] != 0xFF) return std::nullopt;
+    const std::uint8_t marker = p[at + 1];
+    if (marker == 0xFF) {  // fill byte
+      ++at;
+      continue;
+    }
+    const bool start_of_frame =
+        marker >= 0xC0 && marker <= 0xCF && marker != 0xC4 && marker != 0xC8 && marker != 0xCC;
+    if (start_of_frame) {
+      if (at + 9 > n) return std::nullopt;
+      return std::pair{bigEndian(p + at + 7, 2), bigEndian(p + at + 5, 2)};
+    }
+    if (marker == 0x01 || (marker >= 0xD0 && marker <= 0xD7)) {
+      at += 2;
+    } else {
+      at += 2 + bigEndian(p + at + 2, 2);
+    }
+  }
+  return std::nullopt;
+}
+
+// The largest image a message may declare: far above any depth camera's, and small enough that
+// a corrupt or hostile header cannot make the decoder allocate gigabytes.
+constexpr std::uint32_t kMaxSide = 8192;
+constexpr std::uint64_t kMaxPixels = 4096ULL * 4096ULL;
+
+// The image decoded, or empty when it cannot be; throws core::SourceError when it is neither
+// PNG nor JPEG or declares a size beyond the limits above.
 cv::Mat decoded(const std::vector<std::uint8_t>& data, std::size_t offset, int flags) {
-  const cv::Mat bytes(1, static_cast<int>(data.size() - offset), CV_8UC1,
-                      const_cast<std::uint8_t*>(data.data() + offset));
+  const auto size = declaredSize(data, offset);
+  if (!size) {
+    throw core::SourceError(
+        fmt::format("the {} bytes after the header are not a PNG or JPEG image (or are cut short "
+                    "before its size)",
+                    data.size() - offset));
+  }
+  const auto [width, height] = *size;
+  if (width == 0 || height == 0 || width > kMaxSide || height > kMaxSide ||
+      std::uint64_t{width} * height > kMaxPixels) {
+    throw core::SourceError(fmt::format(
+        "the image declares {} x {} pixels; tessera reads at most {} a side and {} in all", width,
+        height, kMaxSide, kMaxPixels));
+  }
   try {
+    const cv::Mat bytes(1, static_cast<int>(data.size() - offset), CV_8UC1,
+                        const_cast<std::uint8_t*>(data.data() + offset));
     return cv::imdecode(bytes, flags);
   } catch (const cv::Exception&) {
     return {};
@@ -72,7 +137,12 @@ cv::Mat depthFromCompressed(const sensor_msgs::CompressedImage& image) {
         "which tessera does not read)",
         image.data.size()));
   }
-  const cv::Mat png = decoded(image.data, offset, cv::IMREAD_UNCHANGED);
+  cv::Mat png;
+  try {
+    png = decoded(image.data, offset, cv::IMREAD_UNCHANGED);
+  } catch (const core::SourceError& e) {
+    throw core::SourceError(fmt::format("compressedDepth image: {}", e.what()));
+  }
   if (png.empty() || png.type() != CV_16UC1) {
     throw core::SourceError("compressedDepth image's PNG is cut short or not 16-bit grey");
   }
@@ -97,7 +167,25 @@ cv::Mat depthFromCompressed(const sensor_msgs::CompressedImage& image) {
 }
 
 cv::Mat colourFromCompressed(const sensor_msgs::CompressedImage& image) {
-  const cv::Mat bgr = image.data.empty() ? cv::Mat() : decoded(image.data, 0, cv::IMREAD_COLOR);
+  const std::string encoding = encodingOf(image.format);
+  const bool mosaic = encoding.rfind("bayer_", 0) == 0;
+  cv::Mat bgr;
+  try {
+    bgr = decoded(image.data, 0, mosaic ? cv::IMREAD_UNCHANGED : cv::IMREAD_COLOR);
+  } catch (const core::SourceError& e) {
+    throw core::SourceError(
+        fmt::format("compressed colour image in format '{}': {}", image.format, e.what()));
+  }
+  if (mosaic && bgr.type() == CV_8UC1) {
+    // The transport stores a Bayer mosaic as it is (PNG): demosaic it as a raw image is.
+    sensor_msgs::Image raw;
+    raw.encoding = encoding;
+    raw.width = static_cast<std::uint32_t>(bgr.cols);
+    raw.height = static_cast<std::uint32_t>(bgr.rows);
+    raw.step = raw.width;
+    raw.data.assign(bgr.datastart, bgr.dataend);
+    return colourFromImage(raw);
+  }
   if (bgr.empty()) {
     throw core::SourceError(
         fmt::format("compressed colour image in format '{}' ({} bytes) cannot be decoded",

@@ -30,7 +30,14 @@ RosFramePublisher::RosFramePublisher(const RosFramePublisherOptions& options)
   imageFromDepth(cv::Mat(1, 2, CV_16UC1, cv::Scalar(1)), options_.depth_encoding);
   imageFromColour(cv::Mat(2, 2, CV_8UC3, cv::Scalar(1, 2, 3)), options_.colour_encoding);
   const bool compressed = !options_.compressed.empty();
-  if (compressed) compressedFromColour(cv::Mat(2, 2, CV_8UC3), options_.compressed);
+  if (compressed) {
+    compressedFromColour(cv::Mat(2, 2, CV_8UC3, cv::Scalar(1, 2, 3)), options_.compressed);
+    if (options_.depth_encoding != "16UC1") {
+      throw core::ConfigError(
+          fmt::format("compressed topics carry 16UC1 depth (compressedDepth PNG), not {}",
+                      options_.depth_encoding));
+    }
+  }
   ensureRosNode(options_.master_uri);
   ros::NodeHandle node;
   if (compressed) {

@@ -129,7 +129,7 @@ class RosSource : public core::FrameSource {
     captured.device_index = static_cast<int>(header.seq);
     try {
       captured.image = decode();
-    } catch (const core::SourceError& e) {
+    } catch (const std::exception& e) {  // SourceError, or no memory for a corrupt size
       warnOnce(fmt::format("{}: {}: {}", label_, options_.topics.depth, e.what()));
       return;
     }
@@ -151,7 +151,7 @@ class RosSource : public core::FrameSource {
     captured.stamp = static_cast<std::int64_t>(header.stamp.toNSec());
     try {
       captured.image = decode();
-    } catch (const core::SourceError& e) {
+    } catch (const std::exception& e) {  // SourceError, or no memory for a corrupt size
       warnOnce(fmt::format("{}: {}: {}", label_, options_.topics.colour, e.what()));
       return;
     }

@@ -3,6 +3,7 @@
 // tessera's poses.
 #include <algorithm>
 #include <cstdint>
+#include <new>
 #include <string>
 #include <vector>
 
@@ -28,6 +29,11 @@ M decode(const RawMessage& raw) {
   } catch (const ros::Exception& e) {
     throw core::SourceError(
         fmt::format("a {} message that cannot be read: {}", raw.datatype, e.what()));
+  } catch (const std::bad_alloc&) {
+    // A corrupt array length: the deserialiser sizes the array before it finds the data short.
+    throw core::SourceError(
+        fmt::format("a {} message of {} bytes that claims an array larger than memory",
+                    raw.datatype, raw.bytes.size()));
   }
   return message;
 }
