@@ -70,6 +70,11 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
   const auto start = std::chrono::steady_clock::now();
   const PipelineConfig& pipeline = config.pipeline;
   const bool live = source.isLive();
+  if (live) {
+    const LoadShedding shedding{pipeline.live_shed_after_ms};
+    parts.integration.shedLoad(shedding);
+    parts.planes.shedLoad(shedding);
+  }
   runGraph(parts.stages, parts.stages, parts.stages,
            {options.threads, live ? pipeline.live_frames_in_flight : pipeline.max_frames_in_flight,
             live ? pipeline.texture_nice_live : pipeline.texture_nice_replay,

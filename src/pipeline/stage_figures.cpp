@@ -95,6 +95,7 @@ void IntegrationFigures::addTo(json& report) const {
   report["frames_without_pose"] = frames_without_pose;
   report["frames_held_out"] = frames_held_out;
   report["frames_between_integrations"] = frames_between_integrations;
+  report["frames_shed"] = frames_shed;
   report["tsdf_bytes"] = tsdf_bytes;
   report["tsdf_blocks_released"] = tsdf_blocks_released;
 }
@@ -106,6 +107,7 @@ void PlaneFigures::addTo(json& report) const {
   report["colour_samples"] = colour_samples;
   report["colour_sample_bytes"] = colour_sample_bytes;
   report["samples_released"] = samples_released;
+  report["colour_frames_shed"] = colour_frames_shed;
   report["loop_corrections_followed"] = loop_corrections_followed;
   report["loop_planes_moved"] = loop_planes_moved;
   report["loop_planes_merged"] = loop_planes_merged;

@@ -180,11 +180,23 @@ IntegrationStage::IntegrationStage(const fusion::TsdfConfig& tsdf, int thread_ca
   map_.setThreadCap(thread_cap);
 }
 
-bool IntegrationStage::wantsFrame(const core::Isometry& T_W_C) {
+bool LoadShedding::late(std::int64_t arrival_ns) const {
+  return after_ms > 0.0 && arrival_ns > 0 &&
+         static_cast<double>(core::steadyNowNs() - arrival_ns) > after_ms * 1e6;
+}
+
+bool IntegrationStage::wantsFrame(const core::Isometry& T_W_C, std::int64_t arrival_ns) {
   ++posed_since_integrated_;
-  const bool wanted = !last_integrated_pose_ ||
-                      posed_since_integrated_ >= map_.config().integrate_every_n_frames ||
-                      farFrom(*last_integrated_pose_, T_W_C);
+  const int every = map_.config().integrate_every_n_frames;
+  const bool far = last_integrated_pose_ && farFrom(*last_integrated_pose_, T_W_C);
+  bool wanted = !last_integrated_pose_ || posed_since_integrated_ >= every || far;
+  // A moved camera sees new surface, so only an integration due by count waits for a frame
+  // that is not late.
+  if (wanted && last_integrated_pose_ && !far &&
+      posed_since_integrated_ < every + LoadShedding::kMaxInARow && shedding_.late(arrival_ns)) {
+    ++figures_.frames_shed;
+    wanted = false;
+  }
   if (wanted) {
     last_integrated_pose_ = T_W_C;
     posed_since_integrated_ = 0;
@@ -213,7 +225,7 @@ FusedFrame IntegrationStage::process(TrackedFrame tracked) {
     fused.frame = std::move(tracked.frame);
     return fused;
   }
-  if (fused.T_W_C && !wantsFrame(*fused.T_W_C)) {
+  if (fused.T_W_C && !wantsFrame(*fused.T_W_C, tracked.frame.arrival_ns)) {
     fused.between_integrations = true;
     ++figures_.frames_between_integrations;
     fused.figures.tsdf_bytes = map_.memoryBytes();
@@ -305,8 +317,16 @@ std::optional<core::Isometry> PlaneStage::colourPose(const core::Frame& frame,
 std::optional<Eigen::Vector3f> PlaneStage::sampleColours(
     const core::Frame& frame, const planes::PlaneDetection& detection, const core::Isometry& T_W_C,
     std::vector<int> ids, const std::optional<core::Isometry>& T_W_C_colour) {
-  if (wantsColours(frame.index, T_W_C)) {
+  bool wanted = colour_shed_in_a_row_ > 0 || wantsColours(frame.index, T_W_C);
+  if (wanted && colour_shed_in_a_row_ < LoadShedding::kMaxInARow &&
+      shedding_.late(frame.arrival_ns)) {
+    ++colour_shed_in_a_row_;
+    ++figures_.colour_frames_shed;
+    wanted = false;
+  }
+  if (wanted) {
     last_colour_pose_ = T_W_C;
+    colour_shed_in_a_row_ = 0;
   } else {
     // A skipped frame still colours the patches that have hardly any colour yet (new ones),
     // so that no patch is left without samples.

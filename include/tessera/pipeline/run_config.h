@@ -21,6 +21,10 @@ struct PipelineConfig {
   // Live sources: frames in the pipeline at once. The device does not wait: while this many
   // are in flight its newer frames queue (OpenNi2Options::queue_frames) and the oldest drop.
   int live_frames_in_flight = 2;
+  // Live sources: a frame that reaches the integration or the colour sampling more than this
+  // many milliseconds after its arrival leaves out what it can (LoadShedding, stages.h);
+  // 0: never.
+  double live_shed_after_ms = 50.0;
   // How far (0 to 19) the nice value of the threads that describe and commit finalized
   // patches is raised above the process's, for live sources and for replay: with the cores
   // short, the frame path runs first and texturing waits for a free core; 0: not at all.

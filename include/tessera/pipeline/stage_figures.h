@@ -102,6 +102,7 @@ struct IntegrationFigures {
   std::size_t frames_held_out = 0;      // posed but not fused or textured (--holdout-every)
   // Posed and searched for planes, not integrated (tsdf.integrate_every_n_frames).
   std::size_t frames_between_integrations = 0;
+  std::size_t frames_shed = 0;  // of those, due but late (live: LoadShedding)
   std::size_t tsdf_bytes = 0;
   std::size_t tsdf_blocks_released = 0;  // far behind the camera (tsdf.release_distance_m)
   void addTo(nlohmann::json& report) const;
@@ -115,6 +116,7 @@ struct PlaneFigures {
   std::size_t colour_samples = 0;       // held by all patches
   std::size_t colour_sample_bytes = 0;
   std::size_t samples_released = 0;  // patches whose samples left memory (and came back or not)
+  std::size_t colour_frames_shed = 0;  // due for colour but late, sampled on the next frame
   // Loop-closure corrections the map followed, planes they moved and planes merged after.
   std::size_t loop_corrections_followed = 0, loop_planes_moved = 0, loop_planes_merged = 0;
   void addTo(nlohmann::json& report) const;

@@ -155,6 +155,18 @@ class TrackingStage {
 
 // Integrates posed frames into the TSDF and releases blocks the camera has left far behind.
 // Runs beside the tracking stage: frame N is integrated while frame N+1 is tracked.
+// Live sources: work a frame can do without (an integration due by count alone, a colour
+// sampling) is left out for a frame that reaches it more than `after_ms` after its arrival,
+// and done on the next frame instead, so that a backlog clears rather than ends in dropped
+// frames (docs/ROBOT.md, "When the CPU is short"). A replay's frames carry no arrival time and
+// are never late.
+struct LoadShedding {
+  double after_ms = 0.0;  // 0: never
+  // At most this many frames in a row leave the same work out.
+  static constexpr int kMaxInARow = 2;
+  bool late(std::int64_t arrival_ns) const;
+};
+
 class IntegrationStage {
  public:
   // Every holdout_every-th frame (core::isHeldOut) is posed but neither fused nor textured, so
@@ -169,19 +181,22 @@ class IntegrationStage {
   // With loop closure: keeps the first integrated frame of each keyframe in a log under `dir`,
   // for the TSDF to be fused again at the corrected poses at the end.
   void keepFramesForCorrection(const std::filesystem::path& dir);
+  void shedLoad(LoadShedding shedding) { shedding_ = shedding; }
   // The log, or null without it.
   const fusion::ReintegrationLog* reintegrationLog() const { return log_.get(); }
   const StageTimer& timer() const { return timer_; }
 
  private:
-  // Whether the frame posed at T_W_C is integrated (TsdfConfig::integrate_every_n_frames).
-  bool wantsFrame(const core::Isometry& T_W_C);
+  // Whether the frame posed at T_W_C, arrived at `arrival_ns`, is integrated
+  // (TsdfConfig::integrate_every_n_frames, LoadShedding).
+  bool wantsFrame(const core::Isometry& T_W_C, std::int64_t arrival_ns);
 
   fusion::TsdfMap map_;
   std::unique_ptr<fusion::ReintegrationLog> log_;
   std::optional<std::int64_t> last_logged_keyframe_ns_;
   std::optional<core::Isometry> last_integrated_pose_;
   int posed_since_integrated_ = 0;
+  LoadShedding shedding_;
   IntegrationFigures figures_;  // all but tsdf_bytes, read from the map
   StageTimer timer_;
 };
@@ -212,6 +227,7 @@ class PlaneStage {
   void continueMap(planes::PatchMap&& map) { map_ = std::move(map); }
   // Where finalized patches' colour samples go when they leave memory (PatchMap).
   void spillSamplesTo(std::filesystem::path dir) { map_.setSampleSpillDir(std::move(dir)); }
+  void shedLoad(LoadShedding shedding) { shedding_ = shedding; }
   PlaneFigures figures() const;
   const StageTimer& timer() const { return timer_; }
 
@@ -243,6 +259,8 @@ class PlaneStage {
   planes::PatchMap map_;
   planes::SharpnessGauge sharpness_;
   std::optional<core::Isometry> last_colour_pose_;
+  LoadShedding shedding_;
+  int colour_shed_in_a_row_ = 0;  // > 0: the frames' colours are owed to the next frame
   std::optional<std::pair<std::int64_t, core::Isometry>> previous_pose_;  // time, tracked pose
   bool said_no_colour_time_ = false;
   planes::PlaneAlignmentConfig alignment_;

@@ -1,0 +1,82 @@
+// Live load shedding (LoadShedding, stages.h): a late frame leaves out the work a frame can do
+// without, at most LoadShedding::kMaxInARow frames in a row, and a replay never does.
+#include <gtest/gtest.h>
+
+#include "support/synthetic_plane.h"
+#include "tessera/core/clock.h"
+#include "tessera/pipeline/stages.h"
+
+namespace tessera::pipeline {
+namespace {
+
+constexpr double kShedAfterMs = 50.0;
+
+// A still camera's frame `index` of a plane 1.4 m away, arrived 200 ms ago when `late`, just
+// now otherwise; `replay`: no arrival time, as a recording's frames.
+core::Frame frameOf(std::uint64_t index, bool late, bool replay = false) {
+  const Eigen::Vector3d n = Eigen::Vector3d(0.1, 0.2, -1.0).normalized();
+  core::Frame frame =
+      test::renderPlane(test::kinectIntrinsics(), core::Isometry::Identity(), n, n.z() * 1.4);
+  frame.index = index;
+  frame.timestamp_ns = static_cast<std::int64_t>(index) * 33'333'333;
+  frame.arrival_ns = replay ? 0 : core::steadyNowNs() - (late ? 200'000'000 : 0);
+  return frame;
+}
+
+TrackedFrame trackedOf(core::Frame frame) {
+  TrackedFrame tracked;
+  tracked.frame = std::move(frame);
+  tracked.T_W_C = core::Isometry::Identity();
+  return tracked;
+}
+
+TEST(LoadShedding, ALateFrameLeavesItsIntegrationToTheNextAtMostTwiceInARow) {
+  fusion::TsdfConfig tsdf;  // every 2nd frame
+  IntegrationStage stage(tsdf, 1);
+  stage.shedLoad({kShedAfterMs});
+  const bool late[] = {true, false, true, true, true, false, false, true};
+  std::vector<std::uint64_t> integrated;
+  for (std::uint64_t i = 0; i < 8; ++i) {
+    if (stage.process(trackedOf(frameOf(i, late[i]))).integrated) integrated.push_back(i);
+  }
+  // 0 is the first; 2 and 3 are due but late; 4 is late a third time and integrated; 6 is due
+  // and on time; 7 is late but not due.
+  EXPECT_EQ(integrated, (std::vector<std::uint64_t>{0, 4, 6}));
+  EXPECT_EQ(stage.figures().frames_shed, 2u);
+}
+
+TEST(LoadShedding, AReplayIsNeverLate) {
+  fusion::TsdfConfig tsdf;
+  IntegrationStage stage(tsdf, 1);
+  stage.shedLoad({kShedAfterMs});
+  std::vector<std::uint64_t> integrated;
+  for (std::uint64_t i = 0; i < 6; ++i) {
+    if (stage.process(trackedOf(frameOf(i, false, true))).integrated) integrated.push_back(i);
+  }
+  EXPECT_EQ(integrated, (std::vector<std::uint64_t>{0, 2, 4}));
+  EXPECT_EQ(stage.figures().frames_shed, 0u);
+}
+
+// The plane stage's colour sampling, due on even frames: late frames owe it to the next, and
+// the third late frame in a row samples.
+TEST(LoadShedding, ALateFrameOwesItsColoursToTheNext) {
+  const auto coloursShed = [](bool late) {
+    PlaneStage planes({}, {}, {});
+    planes.shedLoad({kShedAfterMs});
+    for (std::uint64_t i = 0; i < 6; ++i) {
+      TrackedFrame tracked = trackedOf(frameOf(i, late));
+      FusedFrame fused;
+      fused.frame = std::move(tracked.frame);
+      fused.T_W_C = tracked.T_W_C;
+      fused.integrated = true;
+      planes.process(std::move(fused));
+    }
+    return planes.figures().colour_frames_shed;
+  };
+  // Late: 0 and 1 (owed) shed, 2 samples, 3 is not due, 4 and 5 (owed) shed.
+  EXPECT_EQ(coloursShed(true), 4u);
+  EXPECT_EQ(coloursShed(false), 0u);
+}
+
+}  // namespace
+}  // namespace tessera::pipeline
