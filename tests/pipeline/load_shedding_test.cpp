@@ -9,17 +9,19 @@
 namespace tessera::pipeline {
 namespace {
 
-constexpr double kShedAfterMs = 50.0;
+// Far above the default (50 ms), so that a frame that arrived just now is on time however
+// slowly a sanitizer build processes it.
+constexpr double kShedAfterMs = 10'000.0;
 
-// A still camera's frame `index` of a plane 1.4 m away, arrived 200 ms ago when `late`, just
-// now otherwise; `replay`: no arrival time, as a recording's frames.
+// A still camera's frame `index` of a plane 1.4 m away, arrived a minute ago when `late`,
+// just now otherwise; `replay`: no arrival time, as a recording's frames.
 core::Frame frameOf(std::uint64_t index, bool late, bool replay = false) {
   const Eigen::Vector3d n = Eigen::Vector3d(0.1, 0.2, -1.0).normalized();
   core::Frame frame =
       test::renderPlane(test::kinectIntrinsics(), core::Isometry::Identity(), n, n.z() * 1.4);
   frame.index = index;
   frame.timestamp_ns = static_cast<std::int64_t>(index) * 33'333'333;
-  frame.arrival_ns = replay ? 0 : core::steadyNowNs() - (late ? 200'000'000 : 0);
+  frame.arrival_ns = replay ? 0 : core::steadyNowNs() - (late ? 60'000'000'000 : 0);
   return frame;
 }
 

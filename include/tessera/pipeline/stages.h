@@ -153,8 +153,6 @@ class TrackingStage {
   StageTimer timer_;
 };
 
-// Integrates posed frames into the TSDF and releases blocks the camera has left far behind.
-// Runs beside the tracking stage: frame N is integrated while frame N+1 is tracked.
 // Live sources: work a frame can do without (an integration due by count alone, a colour
 // sampling) is left out for a frame that reaches it more than `after_ms` after its arrival,
 // and done on the next frame instead, so that a backlog clears rather than ends in dropped
@@ -167,6 +165,8 @@ struct LoadShedding {
   bool late(std::int64_t arrival_ns) const;
 };
 
+// Integrates posed frames into the TSDF and releases blocks the camera has left far behind.
+// Runs beside the tracking stage: frame N is integrated while frame N+1 is tracked.
 class IntegrationStage {
  public:
   // Every holdout_every-th frame (core::isHeldOut) is posed but neither fused nor textured, so
