@@ -6,6 +6,7 @@
 #include <fmt/format.h>
 
 #include "stop_request.h"
+#include "tessera/core/bouncing_source.h"
 #include "tessera/core/error.h"
 #include "tessera/drivers/dataset_source.h"
 #include "tessera/drivers/freenect/freenect_source.h"
@@ -132,6 +133,13 @@ void addSourceOptions(CLI::App& command, SourceArguments& args) {
   command.add_option("--max-frames", args.max_frames, "Stop after this many frames (0: all)")
       ->capture_default_str();
   command
+      .add_option("--bounce", args.bounce,
+                  "Recordings: play N passes, alternately forwards and backwards, so that a "
+                  "short clip becomes a long stream whose camera path never jumps (the frames "
+                  "are kept in memory, up to 2 GB)")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  command
       .add_option("--depth-mode", args.depth_mode,
                   "Live devices: depth stream mode WIDTHxHEIGHT@FPS (`tessera devices` lists them)")
       ->capture_default_str();
@@ -158,8 +166,10 @@ void addSourceOptions(CLI::App& command, SourceArguments& args) {
   addRosOptions(command, args);
 }
 
-std::unique_ptr<core::FrameSource> openSource(const std::string& spec,
-                                              const SourceArguments& args) {
+namespace {
+
+std::unique_ptr<core::FrameSource> openOnePass(const std::string& spec,
+                                               const SourceArguments& args) {
   std::optional<core::Intrinsics> intrinsics;
   if (!args.intrinsics.empty()) intrinsics = core::parseIntrinsicsSpec(args.intrinsics);
   if (spec.rfind("ros://", 0) == 0) return openRos(spec, args, intrinsics);
@@ -240,6 +250,15 @@ std::unique_ptr<core::FrameSource> openSource(const std::string& spec,
         spec));
   }
   throw core::SourceError(fmt::format("{}: no such file or folder", spec));
+}
+
+}  // namespace
+
+std::unique_ptr<core::FrameSource> openSource(const std::string& spec,
+                                              const SourceArguments& args) {
+  std::unique_ptr<core::FrameSource> source = openOnePass(spec, args);
+  if (args.bounce == 1) return source;
+  return std::make_unique<core::BouncingSource>(std::move(source), args.bounce);
 }
 
 fs::path defaultRecording() {

@@ -17,6 +17,7 @@ struct SourceArguments {
   std::string intrinsics;          // --intrinsics
   double depth_units_per_m = 0.0;  // --depth-scale, 0: the source's own
   std::size_t max_frames = 0;      // --max-frames, 0: all
+  int bounce = 1;                  // --bounce: passes back and forth over a recording
   // Live devices (openni2://).
   std::string depth_mode = "640x480@30";   // --depth-mode
   std::string colour_mode = "640x480@30";  // --colour-mode
