@@ -137,7 +137,7 @@ void addSourceOptions(CLI::App& command, SourceArguments& args) {
                   "Recordings: play N passes, alternately forwards and backwards, so that a "
                   "short clip becomes a long stream whose camera path never jumps (the frames "
                   "are kept in memory, up to 2 GB)")
-      ->check(CLI::PositiveNumber)
+      ->check(CLI::Range(1, 1000))
       ->capture_default_str();
   command
       .add_option("--depth-mode", args.depth_mode,
