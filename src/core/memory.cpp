@@ -4,6 +4,8 @@
 #include <unistd.h>
 
 #include <cstddef>
+#include <cstdlib>
+#include <cstring>
 #include <fstream>
 
 namespace tessera::core {
@@ -21,5 +23,14 @@ double heapInUseMb() {
 }
 
 void returnFreedMemory() { malloc_trim(0); }
+
+void keepFreedMemoryForReuse() {
+  const char* tunables = std::getenv("GLIBC_TUNABLES");
+  if (tunables != nullptr && std::strstr(tunables, "glibc.malloc.") != nullptr) return;
+  constexpr int kMmapThreshold = 32 << 20;  // glibc's largest on 64-bit
+  constexpr int kTrimThreshold = 128 << 20;
+  mallopt(M_MMAP_THRESHOLD, kMmapThreshold);
+  mallopt(M_TRIM_THRESHOLD, kTrimThreshold);
+}
 
 }  // namespace tessera::core

@@ -3,7 +3,9 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <deque>
 #include <memory>
+#include <mutex>
 #include <thread>
 #include <tuple>
 
@@ -66,25 +68,40 @@ class PatchJobs {
 };
 
 // Holds the frame path back while too many patch jobs wait to be described and committed: a
-// frame reported while `bound` or more wait keeps its place in the limiter until commits
-// free one. A replay's source then waits; a live device drops frames instead. Without it
-// texturing that falls behind queues patches, colour samples and all, without end.
+// frame reported while the bound is reached keeps its place in the limiter until commits free
+// one. A replay's source then waits; a live device drops frames instead. Without it texturing
+// that falls behind queues patches, colour samples and all, without end. The bound counts the
+// jobs, or (live) the bytes of their colour samples.
 class PatchBacklog {
  public:
-  explicit PatchBacklog(std::size_t bound) : bound_(bound) {}
+  PatchBacklog(std::size_t max_jobs, std::size_t max_bytes)
+      : max_jobs_(max_jobs), max_bytes_(max_bytes) {}
 
-  // The plane stage (or the end of the stream) queued `jobs` more.
-  void queued(std::size_t jobs) { queued_ += jobs; }
+  // The plane stage (or the end of the stream) queued `jobs` more, in their sequence order.
+  void queued(const std::vector<JobMessage>& jobs) {
+    const std::lock_guard lock(mutex_);
+    for (const JobMessage& job : jobs) {
+      const std::size_t bytes = job->patch.samples.size() * sizeof(planes::ColourSample);
+      waiting_.push_back(bytes);
+      waiting_bytes_ += bytes;
+    }
+  }
   // The report node's calls (serial): how many limiter places to free now.
   std::size_t frameReported() {
-    if (waiting() < bound_) return 1;
+    const std::lock_guard lock(mutex_);
+    if (!full()) return 1;
     ++withheld_;
     return 0;
   }
+  // Jobs are committed in their sequence order: the oldest waiting one is done.
   std::size_t jobDone() {
-    ++done_;
+    const std::lock_guard lock(mutex_);
+    if (!waiting_.empty()) {
+      waiting_bytes_ -= waiting_.front();
+      waiting_.pop_front();
+    }
     std::size_t freed = 0;
-    while (withheld_ > 0 && waiting() < bound_) {
+    while (withheld_ > 0 && !full()) {
       --withheld_;
       ++freed;
     }
@@ -92,11 +109,14 @@ class PatchBacklog {
   }
 
  private:
-  std::size_t waiting() const { return queued_.load() - done_; }
+  bool full() const {
+    return max_bytes_ > 0 ? waiting_bytes_ >= max_bytes_ : waiting_.size() >= max_jobs_;
+  }
 
-  const std::size_t bound_;
-  std::atomic<std::size_t> queued_{0};
-  std::size_t done_ = 0, withheld_ = 0;
+  const std::size_t max_jobs_, max_bytes_;
+  std::mutex mutex_;                 // the plane stage queues, the report node counts
+  std::deque<std::size_t> waiting_;  // each waiting job's sample bytes, oldest first
+  std::size_t waiting_bytes_ = 0, withheld_ = 0;
 };
 
 // Tells the graph that an async node's job is done (however it ended), so that
@@ -165,9 +185,10 @@ std::size_t runGraph(FramePath& frames, PatchPath& patches, RunReport& report,
     // The plane stage sends the frame on to the report and each patch it finalized (or
     // retired) to the patch path, numbered in the order it happened.
     PatchJobs jobs;
-    PatchBacklog backlog(static_cast<std::size_t>(std::max(1, options.max_patches_waiting)));
+    PatchBacklog backlog(static_cast<std::size_t>(std::max(1, options.max_patches_waiting)),
+                         options.max_patch_bytes_waiting);
     auto queue = [&backlog](std::vector<JobMessage> batch, auto& to) {
-      backlog.queued(batch.size());
+      backlog.queued(batch);
       for (JobMessage& job : batch) to.try_put(std::move(job));
     };
     using PlanesNode = flow::multifunction_node<Numbered<FusedFrame>,

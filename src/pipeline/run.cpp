@@ -10,6 +10,7 @@
 #include "internal/saved_map.h"
 #include "tessera/core/cpu_time.h"
 #include "tessera/core/error.h"
+#include "tessera/core/memory.h"
 #include "tessera/pipeline/flow_graph.h"
 
 namespace tessera::pipeline {
@@ -49,6 +50,7 @@ void addRunFiles(std::vector<std::filesystem::path>& files, const std::filesyste
 RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
                        const RunOptions& given) {
   RunOptions options = given;
+  core::keepFreedMemoryForReuse();  // returned every return_freed_memory_s instead
   std::optional<internal::SavedMap> earlier;
   if (options.continue_map) {
     // Read whole before anything is written: a map that cannot be continued changes nothing.
@@ -78,7 +80,8 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
   runGraph(parts.stages, parts.stages, parts.stages,
            {options.threads, live ? pipeline.live_frames_in_flight : pipeline.max_frames_in_flight,
             live ? pipeline.texture_nice_live : pipeline.texture_nice_replay,
-            pipeline.max_patches_waiting});
+            pipeline.max_patches_waiting,
+            live ? static_cast<std::size_t>(pipeline.live_patches_waiting_mb * (1 << 20)) : 0});
   parts.sink.flush();
   parts.store->finishRun(parts.run_id);  // a server's store first sends what its journal holds
   const double wall_s =

@@ -13,13 +13,14 @@ void readConfig(const core::ConfigSection& section, PipelineConfig& config) {
   section.read("texture_nice_live", config.texture_nice_live);
   section.read("texture_nice_replay", config.texture_nice_replay);
   section.read("max_patches_waiting", config.max_patches_waiting);
+  section.read("live_patches_waiting_mb", config.live_patches_waiting_mb);
   section.read("return_freed_memory_s", config.return_freed_memory_s);
   section.read("checkpoint_every_s", config.checkpoint_every_s);
   if (!(config.return_freed_memory_s >= 0.0) || !(config.checkpoint_every_s >= 0.0) ||
-      !(config.live_shed_after_ms >= 0.0)) {
+      !(config.live_shed_after_ms >= 0.0) || !(config.live_patches_waiting_mb >= 0.0)) {
     throw core::ConfigError(
-        "pipeline: return_freed_memory_s, checkpoint_every_s and live_shed_after_ms must be 0 "
-        "or more");
+        "pipeline: return_freed_memory_s, checkpoint_every_s, live_shed_after_ms and "
+        "live_patches_waiting_mb must be 0 or more");
   }
   if (config.max_frames_in_flight < 1 || config.live_frames_in_flight < 1 ||
       config.max_patches_waiting < 1) {

@@ -3,8 +3,8 @@
 // end-of-stream patches last), each batch's commits all reach the report, the report is never
 // called by two threads at once, and no more frames are in flight than the limiter allows;
 // texturing runs at a lower priority than the frame path, the frame path waits while too many
-// patches wait for their textures, and a failure to describe a patch ends the run with its
-// error; for 1, 2 and 4 threads.
+// patches (or, live, too many bytes of their colour samples) wait for their textures, and a failure
+// to describe a patch ends the run with its error; for 1, 2 and 4 threads.
 #include "tessera/pipeline/flow_graph.h"
 
 #include <atomic>
@@ -32,10 +32,14 @@ void nap(std::mt19937& random, int max_us) {
       std::chrono::microseconds(std::uniform_int_distribution<int>(0, max_us)(random)));
 }
 
+constexpr std::size_t kSamplesPerPatch = 1000;
+constexpr std::size_t kPatchBytes = kSamplesPerPatch * sizeof(planes::ColourSample);
+
 planes::PatchSnapshot patch(int id) {
   planes::PatchSnapshot snapshot;
   snapshot.id = id;
   snapshot.version = 1;
+  snapshot.samples.resize(kSamplesPerPatch);
   return snapshot;
 }
 
@@ -282,14 +286,15 @@ TEST_P(FlowGraphTest, HoldsTheFramePathBackWhileTooManyPatchesWaitForTextures) {
   // and only the frames already past the limiter add to the bound. Unbounded (and describing
   // held until the whole stream is read, so that timing cannot decide it), every patch job of
   // the stream waits at once.
-  auto run = [](int threads, int bound) {
+  auto run = [](int threads, int bound, std::size_t bound_bytes = 0) {
     FakeFrames frames;
     FakePatches patches;
     patches.describe_max_us = 20'000;
-    if (bound > 100) patches.hold_until = &frames.stream_read;
+    const bool unbounded = bound_bytes > 0 ? bound_bytes > 100 * kPatchBytes : bound > 100;
+    if (unbounded) patches.hold_until = &frames.stream_read;
     frames.commits_done = &patches.commits_done;
     FakeReport report(frames);
-    EXPECT_EQ(runGraph(frames, patches, report, {threads, kInFlight, 0, bound}),
+    EXPECT_EQ(runGraph(frames, patches, report, {threads, kInFlight, 0, bound, bound_bytes}),
               static_cast<std::size_t>(kStreamFrames));
     EXPECT_EQ(patches.commit_order, frames.finalization_order);
     EXPECT_EQ(frames.in_flight, 0);
@@ -299,6 +304,12 @@ TEST_P(FlowGraphTest, HoldsTheFramePathBackWhileTooManyPatchesWaitForTextures) {
   const int allowance = bound + kInFlight * FakeFrames::kMostJobsPerFrame;
   EXPECT_LE(run(GetParam(), bound), allowance);
   EXPECT_GT(run(GetParam(), 1000), allowance) << "the test's stream does not overload texturing";
+
+  // Live: the bound is the waiting patches' samples, whatever their count. Two patches' worth
+  // holds the backlog like a bound of two (retirements, without samples, may add one);
+  // a thousand patches' worth does not hold it, though the count's bound is 1.
+  EXPECT_LE(run(GetParam(), 1, 2 * kPatchBytes), allowance + 2);
+  EXPECT_GT(run(GetParam(), 1, 1000 * kPatchBytes), allowance);
 }
 
 INSTANTIATE_TEST_SUITE_P(Threads, FlowGraphTest, ::testing::Values(1, 2, 4),

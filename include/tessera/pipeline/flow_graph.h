@@ -76,6 +76,8 @@ struct GraphOptions {
   // the bound the frame path waits (a live device drops frames). The frames already in
   // flight may still finalize a few more.
   int max_patches_waiting = 4;
+  // > 0: the bound is instead the waiting patches' colour samples, in bytes (live sources).
+  std::size_t max_patch_bytes_waiting = 0;
 };
 
 // Runs the stages over the whole stream, then finishes the patches (end of stream) and waits

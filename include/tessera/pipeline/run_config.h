@@ -33,6 +33,10 @@ struct PipelineConfig {
   // Finalized patches waiting for their textures, at most: at the bound a replay's source
   // waits and a live device drops frames, so that a backlog cannot grow the memory without end.
   int max_patches_waiting = 4;
+  // Live sources: the bound is the waiting patches' colour samples instead, in MB (their count
+  // is then not bounded), so that a burst of finalizations, a room's surfaces seen again, is
+  // textured a little later rather than costing frames. 0: max_patches_waiting applies live too.
+  double live_patches_waiting_mb = 256.0;
   // Seconds between returns of the freed memory glibc keeps to the kernel (malloc_trim, after
   // a commit, off the frame path); 0: never. Frees on many threads leave free pages in many
   // arenas that glibc does not give back by itself.
