@@ -3,6 +3,7 @@
 #include <cmath>
 #include <limits>
 #include <utility>
+#include <vector>
 
 #include <fmt/format.h>
 #include <opencv2/imgproc.hpp>
@@ -50,6 +51,30 @@ OrganisedPoints organisedPoints(const core::Frame& frame, const PlaneDetectorCon
   return out;
 }
 
+// The bounding box of each label 0..count-1 in `labels` (CV_8U); empty for a label not there.
+// Each plane's refit then works in its own box, not over the whole image.
+std::vector<cv::Rect> labelBoxes(const cv::Mat& labels, int count) {
+  std::vector<int> x0(count, labels.cols), y0(count, labels.rows), x1(count, -1), y1(count, -1);
+  for (int v = 0; v < labels.rows; ++v) {
+    const auto* row = labels.ptr<std::uint8_t>(v);
+    for (int u = 0; u < labels.cols; ++u) {
+      const int label = row[u];
+      if (label >= count) continue;
+      x0[label] = std::min(x0[label], u);
+      x1[label] = std::max(x1[label], u);
+      y0[label] = std::min(y0[label], v);
+      y1[label] = std::max(y1[label], v);
+    }
+  }
+  std::vector<cv::Rect> boxes(static_cast<std::size_t>(count));
+  for (int label = 0; label < count; ++label) {
+    if (x1[label] < 0) continue;
+    boxes[static_cast<std::size_t>(label)] =
+        cv::Rect(cv::Point(x0[label], y0[label]), cv::Point(x1[label] + 1, y1[label] + 1));
+  }
+  return boxes;
+}
+
 PointMoments momentsOf(const cv::Mat& points, const cv::Mat& members) {
   PointMoments moments;
   for (int v = 0; v < members.rows; ++v) {
@@ -64,8 +89,10 @@ PointMoments momentsOf(const cv::Mat& points, const cv::Mat& members) {
 
 // Keeps the pixels of `region` whose disparity is within `threshold_px` of the disparity the
 // plane n . X = offset predicts there: z = offset / (n . ray), ray = ((u-cx)/fx, (v-cy)/fy, 1).
-cv::Mat membersNear(const OrganisedPoints& organised, const cv::Mat& region, const PlaneFit& plane,
-                    const core::Intrinsics& k, const PlaneDetectorConfig& config) {
+// `organised` and `region` are the same window of the working image, at `corner` in it.
+cv::Mat membersNear(const OrganisedPoints& organised, const cv::Mat& region,
+                    const cv::Point& corner, const PlaneFit& plane, const core::Intrinsics& k,
+                    const PlaneDetectorConfig& config) {
   cv::Mat members = cv::Mat::zeros(region.size(), CV_8UC1);
   const double focal_baseline = k.fx * config.baseline_m;
   const int step = config.working_scale;
@@ -75,7 +102,8 @@ cv::Mat membersNear(const OrganisedPoints& organised, const cv::Mat& region, con
     auto* out = members.ptr<std::uint8_t>(v);
     for (int u = 0; u < region.cols; ++u) {
       if (in[u] == 0) continue;
-      const Eigen::Vector3d ray((u * step - k.cx) / k.fx, (v * step - k.cy) / k.fy, 1.0);
+      const Eigen::Vector3d ray(((u + corner.x) * step - k.cx) / k.fx,
+                                ((v + corner.y) * step - k.cy) / k.fy, 1.0);
       const double predicted = focal_baseline * plane.normal.dot(ray) / plane.offset;
       if (std::abs(uvw[u][2] - predicted) <= config.refit_threshold_px) out[u] = 1;
     }
@@ -85,11 +113,13 @@ cv::Mat membersNear(const OrganisedPoints& organised, const cv::Mat& region, con
 
 // The region's 3-D least-squares plane, refitted once more after dropping the pixels far from
 // the first fit. Returns the members kept (CV_8U, nonzero) and the plane facing the camera.
+// `organised` and `region` are the window at `corner` that holds the region: the members lie
+// inside it, the opening below only removes pixels.
 std::pair<cv::Mat, DetectedPlane> refit(const OrganisedPoints& organised, const cv::Mat& region,
-                                        const core::Intrinsics& k,
+                                        const cv::Point& corner, const core::Intrinsics& k,
                                         const PlaneDetectorConfig& config) {
   PlaneFit fit = fitPlane(momentsOf(organised.points_C, region));
-  cv::Mat members = membersNear(organised, region, fit, k, config);
+  cv::Mat members = membersNear(organised, region, corner, fit, k, config);
   // Where the plane meets another surface, that surface's pixels near the intersection line
   // are within the threshold too, and region growing follows them in thin strips. An opening
   // removes strips narrower than the kernel.
@@ -137,10 +167,15 @@ PlaneDetection PlaneDetector::detect(const core::Frame& frame) const {
       cv::Mat(organised.points_C.size(), CV_8UC1, cv::Scalar(PlaneDetection::kNoPlane));
   if (grown.empty()) return detection;
   const int found = std::min(coefficients.rows, static_cast<int>(PlaneDetection::kNoPlane));
+  const std::vector<cv::Rect> boxes = labelBoxes(grown, found);
   for (int label = 0; label < found; ++label) {
-    auto [members, plane] = refit(organised, grown == label, k, config_);
+    const cv::Rect& box = boxes[static_cast<std::size_t>(label)];
+    if (box.empty()) continue;
+    const OrganisedPoints window{organised.points_C(box), organised.disparity(box)};
+    auto [members, plane] = refit(window, grown(box) == label, box.tl(), k, config_);
     if (plane.pixels < static_cast<std::size_t>(config_.min_pixels)) continue;
-    detection.labels.setTo(static_cast<int>(detection.planes.size()), members);
+    cv::Mat labels = detection.labels(box);
+    labels.setTo(static_cast<int>(detection.planes.size()), members);
     detection.planes.push_back(plane);
   }
   return detection;
