@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <optional>
+#include <vector>
 
 #include <opencv2/imgproc.hpp>
 
@@ -212,9 +213,15 @@ std::optional<Eigen::Vector3f> PatchMap::addColours(
     }
   }
 
-  // Pass one: the pixels whose measured depth confirms their patch's plane.
+  // Pass one: the pixels whose measured depth confirms their patch's plane. The label of pixel
+  // column x is in column x / scale, looked up rather than divided for every pixel; the
+  // pixels' buffer (5 MB at 640x480) is kept from frame to frame rather than mapped afresh.
+  std::vector<int> label_column(static_cast<std::size_t>(frame.rgb.cols));
+  for (int x = 0; x < frame.rgb.cols; ++x) label_column[static_cast<std::size_t>(x)] = x / scale;
+  const int* column = label_column.data();
   cv::Mat sees_plane = cv::Mat::zeros(frame.rgb.size(), CV_8UC1);
-  cv::Mat plane_pixels(frame.rgb.size(), CV_32FC4);
+  thread_local cv::Mat plane_pixels;
+  plane_pixels.create(frame.rgb.size(), CV_32FC4);
   const auto tolerance_m = static_cast<float>(config_.colour_depth_tolerance_m);
   const auto tolerance_per_m2 = static_cast<float>(config_.colour_depth_tolerance_per_m2);
   const auto hit = [&](const ColourTarget& target, const Eigen::Vector3f& ray, float measured) {
@@ -227,7 +234,7 @@ std::optional<Eigen::Vector3f> PatchMap::addColours(
     auto* out = plane_pixels.ptr<PlanePixel>(y);
     const auto ray_y = static_cast<float>((y - k.cy) / k.fy);
     for (int x = 0; x < frame.rgb.cols; ++x) {
-      const std::uint8_t l = label[x / scale];
+      const std::uint8_t l = label[column[x]];
       if (l >= targets.size() || targets[l].tiles.empty() || depth[x] == 0) continue;
       const Eigen::Vector3f ray(static_cast<float>((x - k.cx) / k.fx), ray_y, 1.0F);
       const auto pixel = hit(targets[l], ray, static_cast<float>(depth[x]) * 1e-3F);
@@ -251,7 +258,7 @@ std::optional<Eigen::Vector3f> PatchMap::addColours(
       auto* out = neighbour.pixels.ptr<PlanePixel>(y - area.y);
       const auto ray_y = static_cast<float>((y - k.cy) / k.fy);
       for (int x = area.x; x < area.x + area.width; ++x) {
-        if (label[x / scale] != neighbour.region || depth[x] == 0) continue;
+        if (label[column[x]] != neighbour.region || depth[x] == 0) continue;
         const Eigen::Vector3f ray(static_cast<float>((x - k.cx) / k.fx), ray_y, 1.0F);
         const auto pixel = hit(neighbour.target, ray, static_cast<float>(depth[x]) * 1e-3F);
         if (!pixel) continue;
@@ -289,7 +296,7 @@ std::optional<Eigen::Vector3f> PatchMap::addColours(
       const auto* pixel = plane_pixels.ptr<PlanePixel>(y);
       for (int x = 0; x < frame.rgb.cols; x += 2) {
         if (sees[x] == 0 || !smooth(frame.rgb, x, y)) continue;
-        const TileTarget* tile = targets[label[x / scale]].tileAt(pixel[x].u, pixel[x].v);
+        const TileTarget* tile = targets[label[column[x]]].tileAt(pixel[x].u, pixel[x].v);
         if (tile == nullptr) continue;
         const auto held = tile->patch->samples.colourAt(pixel[x].u, pixel[x].v);
         if (held) pairs.push_back({Eigen::Vector3f(rgb[x][0], rgb[x][1], rgb[x][2]), *held});
@@ -320,7 +327,7 @@ std::optional<Eigen::Vector3f> PatchMap::addColours(
     const auto* pixel = plane_pixels.ptr<PlanePixel>(y);
     for (int x = 0; x < frame.rgb.cols; ++x) {
       if (sees[x] == 0) continue;
-      addSample(targets[label[x / scale]].tileAt(pixel[x].u, pixel[x].v), pixel[x], rgb[x]);
+      addSample(targets[label[column[x]]].tileAt(pixel[x].u, pixel[x].v), pixel[x], rgb[x]);
     }
   }
   for (Neighbour& neighbour : neighbours) {
