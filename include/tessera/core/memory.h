@@ -19,8 +19,9 @@ void returnFreedMemory();
 // heap's top is kept up to 128 MB. A frame's images, point clouds and pyramids are then
 // allocated again in pages already resident, instead of being faulted in afresh each frame
 // (8 % of the CPU of a replay); returnFreedMemory(), called every few seconds, bounds what
-// is kept. Call once at start, before the threads. Skipped when GLIBC_TUNABLES sets malloc
-// tunables: the user's choice stands.
+// is kept. runPipeline calls it as a run starts (mallopt is safe with other threads running;
+// calling it again changes nothing). Skipped when GLIBC_TUNABLES sets malloc tunables: the
+// user's choice stands.
 void keepFreedMemoryForReuse();
 
 }  // namespace tessera::core
