@@ -108,6 +108,7 @@ void PlaneFigures::addTo(json& report) const {
   report["colour_sample_bytes"] = colour_sample_bytes;
   report["samples_released"] = samples_released;
   report["colour_frames_shed"] = colour_frames_shed;
+  report["plane_searches_shed"] = plane_searches_shed;
   report["loop_corrections_followed"] = loop_corrections_followed;
   report["loop_planes_moved"] = loop_planes_moved;
   report["loop_planes_merged"] = loop_planes_merged;

@@ -314,6 +314,16 @@ std::optional<core::Isometry> PlaneStage::colourPose(const core::Frame& frame,
   return pose;
 }
 
+bool PlaneStage::shedsPlaneSearch(std::int64_t arrival_ns) {
+  if (searches_shed_in_a_row_ < LoadShedding::kMaxInARow && shedding_.late(arrival_ns)) {
+    ++searches_shed_in_a_row_;
+    ++figures_.plane_searches_shed;
+    return true;
+  }
+  searches_shed_in_a_row_ = 0;
+  return false;
+}
+
 std::optional<Eigen::Vector3f> PlaneStage::sampleColours(
     const core::Frame& frame, const planes::PlaneDetection& detection, const core::Isometry& T_W_C,
     std::vector<int> ids, const std::optional<core::Isometry>& T_W_C_colour) {
@@ -365,11 +375,17 @@ FusedFrame PlaneStage::process(FusedFrame fused) {
     fused.figures.patches_finalized = map_.finalizedCount();
     return fused;
   }
+  bool searched = true;
   {
     ScopedStageTime time(timer_);
     try {
       followLoopClosure(fused.loop_correction);
-      if ((fused.integrated || fused.between_integrations) && fused.T_W_C) {
+      const bool posed = (fused.integrated || fused.between_integrations) && fused.T_W_C;
+      if (posed && shedsPlaneSearch(fused.frame.arrival_ns)) {
+        // Posed as the frames around it; the map does not see the frame.
+        fused.T_W_C_planes = correction_ * *fused.T_W_C;
+        searched = false;
+      } else if (posed) {
         // The tracked pose, corrected for the drift measured against the patches so far; the
         // map holds it moved on by loop closure.
         fused.T_W_C_planes = correction_ * *fused.T_W_C;
@@ -404,7 +420,8 @@ FusedFrame PlaneStage::process(FusedFrame fused) {
     } catch (const core::Error& e) {
       spdlog::warn("plane detection skipped {}", e.what());
     }
-    fused.patch_events = map_.endFrame(static_cast<long>(fused.frame.index));
+    // A frame the map did not see counts neither as seen nor as out of view.
+    if (searched) fused.patch_events = map_.endFrame(static_cast<long>(fused.frame.index));
   }
   count(fused.patch_events);
   fused.finalized_patches = snapshotsOf(fused.patch_events);

@@ -59,25 +59,47 @@ TEST(LoadShedding, AReplayIsNeverLate) {
   EXPECT_EQ(stage.figures().frames_shed, 0u);
 }
 
+// Runs `frames` frames of the still plane through a plane stage; the frames are late or on
+// time. Returns the stage and which frames found planes.
+struct PlaneRun {
+  PlaneFigures figures;
+  std::vector<std::uint64_t> searched;
+};
+PlaneRun runPlaneStage(std::uint64_t frames, bool late) {
+  PlaneStage planes({}, {}, {});
+  planes.shedLoad({kShedAfterMs});
+  PlaneRun run;
+  for (std::uint64_t i = 0; i < frames; ++i) {
+    TrackedFrame tracked = trackedOf(frameOf(i, late));
+    FusedFrame fused;
+    fused.frame = std::move(tracked.frame);
+    fused.T_W_C = tracked.T_W_C;
+    fused.integrated = true;
+    const FusedFrame out = planes.process(std::move(fused));
+    EXPECT_TRUE(out.T_W_C_planes.has_value()) << "frame " << i << " left unposed";
+    if (out.figures.planes_detected > 0) run.searched.push_back(i);
+  }
+  run.figures = planes.figures();
+  return run;
+}
+
+// Late frames leave their plane search to the next, at most twice in a row: the map sees every
+// third frame, and each of them is posed all the same.
+TEST(LoadShedding, ALateFrameLeavesItsPlaneSearchToTheNextAtMostTwiceInARow) {
+  const PlaneRun late = runPlaneStage(9, true);
+  EXPECT_EQ(late.searched, (std::vector<std::uint64_t>{2, 5, 8}));
+  EXPECT_EQ(late.figures.plane_searches_shed, 6u);
+  const PlaneRun on_time = runPlaneStage(9, false);
+  EXPECT_EQ(on_time.searched.size(), 9u);
+  EXPECT_EQ(on_time.figures.plane_searches_shed, 0u);
+}
+
 // The plane stage's colour sampling, due on even frames: late frames owe it to the next, and
-// the third late frame in a row samples.
+// the third late frame in a row samples. Late, only frames 2, 5 and 8 are searched: 2 is due
+// and sheds, 5 (owed) sheds, 8 samples.
 TEST(LoadShedding, ALateFrameOwesItsColoursToTheNext) {
-  const auto coloursShed = [](bool late) {
-    PlaneStage planes({}, {}, {});
-    planes.shedLoad({kShedAfterMs});
-    for (std::uint64_t i = 0; i < 6; ++i) {
-      TrackedFrame tracked = trackedOf(frameOf(i, late));
-      FusedFrame fused;
-      fused.frame = std::move(tracked.frame);
-      fused.T_W_C = tracked.T_W_C;
-      fused.integrated = true;
-      planes.process(std::move(fused));
-    }
-    return planes.figures().colour_frames_shed;
-  };
-  // Late: 0 and 1 (owed) shed, 2 samples, 3 is not due, 4 and 5 (owed) shed.
-  EXPECT_EQ(coloursShed(true), 4u);
-  EXPECT_EQ(coloursShed(false), 0u);
+  EXPECT_EQ(runPlaneStage(9, true).figures.colour_frames_shed, 2u);
+  EXPECT_EQ(runPlaneStage(9, false).figures.colour_frames_shed, 0u);
 }
 
 }  // namespace

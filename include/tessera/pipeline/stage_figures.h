@@ -117,6 +117,7 @@ struct PlaneFigures {
   std::size_t colour_sample_bytes = 0;
   std::size_t samples_released = 0;  // patches whose samples left memory (and came back or not)
   std::size_t colour_frames_shed = 0;  // due for colour but late, sampled on the next frame
+  std::size_t plane_searches_shed = 0;  // late frames whose plane search was left out
   // Loop-closure corrections the map followed, planes they moved and planes merged after.
   std::size_t loop_corrections_followed = 0, loop_planes_moved = 0, loop_planes_merged = 0;
   void addTo(nlohmann::json& report) const;

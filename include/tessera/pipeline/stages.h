@@ -254,6 +254,9 @@ class PlaneStage {
   // Remembers this frame's tracked pose T_W_C for the next.
   std::optional<core::Isometry> colourPose(const core::Frame& frame, const core::Isometry& T_W_C,
                                            const core::Isometry& T_W_C_map);
+  // A late live frame leaves its plane search (and with it its colours) to the next frames,
+  // at most LoadShedding::kMaxInARow in a row.
+  bool shedsPlaneSearch(std::int64_t arrival_ns);
 
   planes::PlaneDetector detector_;
   planes::PatchMap map_;
@@ -261,6 +264,7 @@ class PlaneStage {
   std::optional<core::Isometry> last_colour_pose_;
   LoadShedding shedding_;
   int colour_shed_in_a_row_ = 0;  // > 0: the frames' colours are owed to the next frame
+  int searches_shed_in_a_row_ = 0;
   std::optional<std::pair<std::int64_t, core::Isometry>> previous_pose_;  // time, tracked pose
   bool said_no_colour_time_ = false;
   planes::PlaneAlignmentConfig alignment_;
