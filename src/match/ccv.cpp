@@ -26,16 +26,33 @@ cv::Mat maskOrAll(const cv::Mat& rgb, const cv::Mat& mask) {
 // the colour of whatever lies outside a patch does not bleed into its border pixels.
 cv::Mat blurredInside(const cv::Mat& rgb, const cv::Mat& mask, double sigma_px) {
   cv::Mat colour;
-  rgb.convertTo(colour, CV_32FC3);
-  if (sigma_px <= 0.0) return colour;
-  cv::Mat weight, blurred_weight, weight3, blurred_weight3, blurred_colour, result;
+  if (sigma_px <= 0.0) {
+    rgb.convertTo(colour, CV_32FC3);
+    return colour;
+  }
+  // The colours with those outside the mask zeroed, and the mask as weights, both blurred;
+  // their ratio is the blurred colour. Only pixels inside the mask are binned, so only theirs
+  // is computed.
+  cv::Mat weight, blurred_weight, blurred_colour;
+  cv::Mat inside_colour(rgb.size(), CV_8UC3, cv::Scalar::all(0));
+  rgb.copyTo(inside_colour, mask);
+  inside_colour.convertTo(colour, CV_32FC3);
   cv::threshold(mask, weight, 0, 1, cv::THRESH_BINARY);
   weight.convertTo(weight, CV_32F);
-  cv::merge(std::vector<cv::Mat>{weight, weight, weight}, weight3);
-  cv::GaussianBlur(colour.mul(weight3), blurred_colour, cv::Size(), sigma_px);
+  cv::GaussianBlur(colour, blurred_colour, cv::Size(), sigma_px);
   cv::GaussianBlur(weight, blurred_weight, cv::Size(), sigma_px);
-  cv::merge(std::vector<cv::Mat>{blurred_weight, blurred_weight, blurred_weight}, blurred_weight3);
-  cv::divide(blurred_colour, cv::max(blurred_weight3, 1e-6), result);
+  cv::Mat result(rgb.size(), CV_32FC3, cv::Scalar::all(0));
+  for (int y = 0; y < rgb.rows; ++y) {
+    const auto* inside = mask.ptr<std::uint8_t>(y);
+    const auto* sum = blurred_colour.ptr<cv::Vec3f>(y);
+    const auto* total = blurred_weight.ptr<float>(y);
+    auto* out = result.ptr<cv::Vec3f>(y);
+    for (int x = 0; x < rgb.cols; ++x) {
+      if (inside[x] == 0) continue;
+      const float w = std::max(total[x], 1e-6F);
+      out[x] = cv::Vec3f(sum[x][0] / w, sum[x][1] / w, sum[x][2] / w);
+    }
+  }
   return result;
 }
 
@@ -66,6 +83,61 @@ cv::Mat colourBins(const cv::Mat& colour, const cv::Mat& mask, const CcvConfig& 
   return bins;
 }
 
+// A connected component (8-neighbours) of pixels of one colour bin.
+struct SameBinComponent {
+  int bin = 0;
+  std::size_t pixels = 0;
+};
+
+// Every such component of `bins` (CV_32S; negative: outside), in one pass of union-find over
+// the pixels rather than one labelling of the whole image per bin.
+std::vector<SameBinComponent> sameBinComponents(const cv::Mat& bins) {
+  const int width = bins.cols;
+  std::vector<int> parent(bins.total(), -1);  // -1: outside; a root is its own parent
+  const auto root = [&parent](int i) {
+    while (parent[static_cast<std::size_t>(i)] != i) {
+      const int up = parent[static_cast<std::size_t>(parent[static_cast<std::size_t>(i)])];
+      parent[static_cast<std::size_t>(i)] = up;  // path halving
+      i = up;
+    }
+    return i;
+  };
+  const auto join = [&](int a, int b) {
+    a = root(a);
+    b = root(b);
+    if (a != b) parent[static_cast<std::size_t>(std::max(a, b))] = std::min(a, b);
+  };
+  for (int y = 0; y < bins.rows; ++y) {
+    const int* row = bins.ptr<int>(y);
+    const int* above = y > 0 ? bins.ptr<int>(y - 1) : nullptr;
+    for (int x = 0; x < width; ++x) {
+      const int bin = row[x];
+      if (bin < 0) continue;
+      const int i = y * width + x;
+      parent[static_cast<std::size_t>(i)] = i;
+      // The neighbours already visited: left, and the three above.
+      if (x > 0 && row[x - 1] == bin) join(i, i - 1);
+      if (above == nullptr) continue;
+      for (int dx = -1; dx <= 1; ++dx) {
+        if (x + dx >= 0 && x + dx < width && above[x + dx] == bin) join(i, i - width + dx);
+      }
+    }
+  }
+  std::vector<SameBinComponent> components;
+  std::vector<int> component_of(parent.size(), -1);
+  const int* all = bins.ptr<int>(0);  // continuous: colourBins allocates it
+  for (std::size_t i = 0; i < parent.size(); ++i) {
+    if (parent[i] < 0) continue;
+    const auto r = static_cast<std::size_t>(root(static_cast<int>(i)));
+    if (component_of[r] < 0) {
+      component_of[r] = static_cast<int>(components.size());
+      components.push_back({all[r], 0});
+    }
+    ++components[static_cast<std::size_t>(component_of[r])].pixels;
+  }
+  return components;
+}
+
 }  // namespace
 
 Ccv computeCcv(const cv::Mat& rgb, const cv::Mat& mask, const CcvConfig& config) {
@@ -82,34 +154,19 @@ Ccv computeCcv(const cv::Mat& rgb, const cv::Mat& mask, const CcvConfig& config)
   if (ccv.pixels == 0) return ccv;
 
   const cv::Mat bins = colourBins(blurredInside(rgb, inside, config.blur_sigma_px), inside, config);
-  std::vector<std::size_t> histogram(bin_count, 0);
-  for (int y = 0; y < bins.rows; ++y) {
-    const int* row = bins.ptr<int>(y);
-    for (int x = 0; x < bins.cols; ++x) {
-      if (row[x] >= 0) ++histogram[static_cast<std::size_t>(row[x])];
-    }
-  }
-
+  std::vector<std::size_t> histogram(bin_count, 0), coherent(bin_count, 0);
   const double n = static_cast<double>(ccv.pixels);
   const double s =
       std::max(static_cast<double>(config.min_coherent_px), config.coherent_fraction * n);
-  cv::Mat members, labels, stats, centroids;
+  for (const SameBinComponent& component : sameBinComponents(bins)) {
+    const auto bin = static_cast<std::size_t>(component.bin);
+    histogram[bin] += component.pixels;
+    if (static_cast<double>(component.pixels) >= s) coherent[bin] += component.pixels;
+  }
   for (std::size_t bin = 0; bin < bin_count; ++bin) {
-    if (histogram[bin] == 0) continue;
-    std::size_t coherent = 0;
-    // A bin with fewer than s pixels cannot hold a coherent component: skip the labelling.
-    if (static_cast<double>(histogram[bin]) >= s) {
-      cv::compare(bins, static_cast<int>(bin), members, cv::CMP_EQ);
-      const int count =
-          cv::connectedComponentsWithStats(members, labels, stats, centroids, 8, CV_32S);
-      for (int label = 1; label < count; ++label) {  // label 0 is the background
-        const int area = stats.at<int>(label, cv::CC_STAT_AREA);
-        if (area >= s) coherent += static_cast<std::size_t>(area);
-      }
-    }
-    ccv.values[bin] = static_cast<float>(static_cast<double>(coherent) / n);
+    ccv.values[bin] = static_cast<float>(static_cast<double>(coherent[bin]) / n);
     ccv.values[bin_count + bin] =
-        static_cast<float>(static_cast<double>(histogram[bin] - coherent) / n);
+        static_cast<float>(static_cast<double>(histogram[bin] - coherent[bin]) / n);
   }
   return ccv;
 }

@@ -145,6 +145,60 @@ TEST(Ccv, ExposureNormalisationKeepsAGainChangedCopyClose) {
   EXPECT_GT(raw, 3 * normalised);  // the normalisation is what keeps it close
 }
 
+// The definition, one colour bin at a time: its pixels labelled by OpenCV (8-neighbours), the
+// components of at least s pixels coherent. Levels 4, no blur, no exposure normalisation.
+std::vector<float> ccvOneBinAtATime(const cv::Mat& rgb, const cv::Mat& mask, int s) {
+  cv::Mat bins(rgb.size(), CV_32SC1, cv::Scalar(-1));
+  for (int y = 0; y < rgb.rows; ++y) {
+    for (int x = 0; x < rgb.cols; ++x) {
+      if (mask.at<std::uint8_t>(y, x) == 0) continue;
+      const cv::Vec3b p = rgb.at<cv::Vec3b>(y, x);
+      bins.at<int>(y, x) = (p[0] / 64) * 16 + (p[1] / 64) * 4 + p[2] / 64;
+    }
+  }
+  const double n = cv::countNonZero(mask);
+  std::vector<float> values(128, 0.0F);
+  for (int bin = 0; bin < 64; ++bin) {
+    const cv::Mat members = bins == bin;
+    cv::Mat labels, stats, centroids;
+    const int count = cv::connectedComponentsWithStats(members, labels, stats, centroids, 8);
+    std::size_t coherent = 0, all = 0;
+    for (int label = 1; label < count; ++label) {
+      const auto area = static_cast<std::size_t>(stats.at<int>(label, cv::CC_STAT_AREA));
+      all += area;
+      if (area >= static_cast<std::size_t>(s)) coherent += area;
+    }
+    values[static_cast<std::size_t>(bin)] = static_cast<float>(static_cast<double>(coherent) / n);
+    values[static_cast<std::size_t>(64 + bin)] =
+        static_cast<float>(static_cast<double>(all - coherent) / n);
+  }
+  return values;
+}
+
+// The one-pass labelling gives the definition's vector exactly, on shapes sprinkled with
+// single-pixel noise (many small components, diagonal contacts) under a mask with holes.
+TEST(Ccv, EqualsTheDefinitionComputedOneBinAtATime) {
+  for (unsigned seed = 1; seed <= 4; ++seed) {
+    cv::Mat image = randomShapes(173, 131, seed);
+    std::mt19937 random(seed);
+    std::uniform_int_distribution<int> x(0, image.cols - 1), y(0, image.rows - 1), level(0, 255);
+    for (int i = 0; i < 3000; ++i) {
+      image.at<cv::Vec3b>(y(random), x(random)) = cv::Vec3b(
+          static_cast<std::uint8_t>(level(random)), static_cast<std::uint8_t>(level(random)),
+          static_cast<std::uint8_t>(level(random)));
+    }
+    cv::Mat mask(image.size(), CV_8UC1, cv::Scalar(255));
+    cv::circle(mask, {x(random), y(random)}, 25, cv::Scalar(0), cv::FILLED);
+    cv::rectangle(mask, {0, 40}, {image.cols - 1, 44}, cv::Scalar(0), cv::FILLED);
+    for (const int s : {1, 3, 50}) {
+      CcvConfig config = exactConfig(s);
+      config.levels = 4;
+      EXPECT_EQ(computeCcv(image, mask, config).values, ccvOneBinAtATime(image, mask, s))
+          << "seed " << seed << ", s " << s;
+    }
+  }
+}
+
 TEST(Ccv, BadInputsThrow) {
   EXPECT_THROW(computeCcv(cv::Mat(), {}), core::Error);
   EXPECT_THROW(computeCcv(cv::Mat(4, 4, CV_8UC1, cv::Scalar(0)), {}), core::Error);
