@@ -40,6 +40,12 @@ CLI::App* addEvalCommand(CLI::App& app, EvalArguments& args) {
                    "With --frames: the map file in RUN_DIR rendered as the patches: patches.obj, "
                    "map.obj or map.glb (read with tinygltf)")
       ->capture_default_str();
+  eval->add_option("--unmatched", args.unmatched_run,
+                   "With --frames: the same run made with matching off (match.enabled: false); its "
+                   "map is rendered over the same pixels, and the view PSNR, SSIM and detail the "
+                   "reuses lose against it are reported, overall and per reused, tiled or layered "
+                   "patch")
+      ->check(CLI::ExistingDirectory);
   eval->add_option("--save", args.save_dir,
                    "With --frames: write render | captured | difference PNGs of a few views here");
   eval->add_option("--max-views", args.max_views,
@@ -92,6 +98,7 @@ int evalCommand(const EvalArguments& args) {
       options.colour_time = args.pose_time == "colour";
       options.save_dir = args.save_dir;
       options.map_file = args.map_file;
+      options.unmatched_run = args.unmatched_run;
       printFigures(eval::evaluateRunViews(args.run_dir, *source, options));
     }
     // Needs no ground truth: written for every run evaluated.

@@ -16,6 +16,7 @@ struct EvalArguments {
   std::string frames;  // --frames: the source whose captured frames the map is rendered into
   std::string save_dir;
   std::string map_file = "patches.obj";  // --map
+  std::string unmatched_run;             // --unmatched
   int max_views = 20;
   int edge_margin_px = eval::ViewEvaluationOptions{}.edge_margin_px;
   std::string pose_time = "colour";  // --pose-time: colour or depth

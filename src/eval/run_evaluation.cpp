@@ -11,6 +11,7 @@
 #include "tessera/core/error.h"
 #include "tessera/core/trajectory.h"
 #include "tessera/eval/plane_evaluation.h"
+#include "tessera/eval/reuse_cost.h"
 #include "tessera/eval/texture_evaluation.h"
 #include "tessera/fusion/mesh_colours.h"
 
@@ -243,10 +244,20 @@ nlohmann::json evaluateRunViews(const std::filesystem::path& run_dir, core::Fram
   const auto corrected = report.find("tsdf_corrected");
   const bool mesh_corrected =
       corrected != report.end() && corrected->is_boolean() && corrected->get<bool>();
-  const ViewEvaluation views =
-      evaluateViews({{"patches", &patches, closed ? &*closed : nullptr},
-                     {"mesh", &mesh, closed && mesh_corrected ? &*closed : nullptr}},
-                    frames, poses, options);
+  std::vector<ViewModel> models = {{"patches", &patches, closed ? &*closed : nullptr},
+                                   {"mesh", &mesh, closed && mesh_corrected ? &*closed : nullptr}};
+  // The unmatched run's map at its own poses (the same as this run's, from the same input).
+  std::optional<RenderMesh> unmatched;
+  std::optional<core::Trajectory> unmatched_poses;
+  if (!options.unmatched_run.empty()) {
+    const std::filesystem::path& other = options.unmatched_run;
+    unmatched = readTexturedMap(other / options.map_file);
+    const auto other_closed = other / "trajectory_closed.txt";
+    unmatched_poses = core::readTumTrajectory(
+        std::filesystem::exists(other_closed) ? other_closed : other / "trajectory.txt");
+    models.push_back({"unmatched", &*unmatched, &*unmatched_poses});
+  }
+  const ViewEvaluation views = evaluateViews(models, frames, poses, options);
   if (views.views.empty()) {
     throw core::Error(fmt::format(
         "{}: no view could be scored: none of its frames has a pose in {} with patches in "
@@ -254,6 +265,13 @@ nlohmann::json evaluateRunViews(const std::filesystem::path& run_dir, core::Fram
         frames.name(), (run_dir / "trajectory.txt").string()));
   }
   nlohmann::json figures = viewFigures(views);
+  if (unmatched) {
+    const auto patches_path = run_dir / "patches.json";
+    figures.update(reuseCostFigures(
+        views, 2,
+        std::filesystem::exists(patches_path) ? readJson(patches_path) : nlohmann::json::object()));
+    figures["view_unmatched_run"] = options.unmatched_run.string();
+  }
   figures["view_frames_source"] = frames.name();
   figures["view_map"] = options.map_file.string();
   mergeIntoReport(report_path, report, figures);

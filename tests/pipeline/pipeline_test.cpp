@@ -441,6 +441,16 @@ TEST(Pipeline, RealTumTexturesRenderMoreFaithfullyThanTheMeshOnTrainingAndHeldOu
   const nlohmann::json at_depth_figures = eval::evaluateRunViews(options.out_dir, again, at_depth);
   EXPECT_EQ(at_depth_figures["view_pose_time"], "depth");
   EXPECT_LT(at_depth_figures["view_psnr_mean"].get<double>(), train - 0.5);
+
+  // Against itself as the unmatched run, the map loses nothing, over the same pixels.
+  eval::ViewEvaluationOptions against_itself;
+  against_itself.unmatched_run = options.out_dir;
+  drivers::DatasetSource once_more(folder);
+  const nlohmann::json itself = eval::evaluateRunViews(options.out_dir, once_more, against_itself);
+  EXPECT_EQ(itself["view_pixels"], figures["view_pixels"]);
+  EXPECT_EQ(itself["view_psnr_lost_db"].get<double>(), 0.0);
+  EXPECT_EQ(itself["view_psnr_lost_holdout_db"].get<double>(), 0.0);
+  EXPECT_EQ(itself["view_detail_lost"].get<double>(), 0.0);
 }
 
 // The matcher's catalog keeps stored textures in memory up to its budget, least recently used

@@ -51,6 +51,9 @@ struct ViewEvaluationOptions {
   // not at the depth image's time (tessera eval --pose-time). Else, and for sources without
   // colour stamps, at the depth image's time.
   bool colour_time = true;
+  // The same run made without matching (tessera eval --unmatched): its map is rendered too, over
+  // the same pixels, for what the reuses cost the view (reuse_cost.h). Empty: none.
+  std::filesystem::path unmatched_run;
 };
 
 struct ViewScore {
