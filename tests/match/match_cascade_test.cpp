@@ -31,6 +31,43 @@ std::shared_ptr<StoredTexture> stored(std::int64_t id, const cv::Mat& rgb, bool 
   return s;
 }
 
+// The farthest a corner of a width x height grid lands between two transforms, in texels.
+double cornerError(const core::Similarity2& a, const core::Similarity2& b, int width, int height) {
+  double worst = 0.0;
+  for (const Eigen::Vector2d& corner :
+       {Eigen::Vector2d(0, 0), Eigen::Vector2d(width, 0), Eigen::Vector2d(0, height),
+        Eigen::Vector2d(width, height)}) {
+    worst = std::max(worst, (a.apply(corner) - b.apply(corner)).norm());
+  }
+  return worst;
+}
+
+// An estimate a texel off (as features or correlation give) is brought to within a tenth of a
+// texel by the direct alignment, and the render's fidelity rises with it.
+TEST(MatchCascade, DirectAlignmentRefinesAnEstimateATexelOff) {
+  cv::setRNGSeed(4);
+  const MatchConfig config;
+  cv::Mat big = texture(400, 300, 7);
+  cv::GaussianBlur(big, big, cv::Size(), 1.5);  // detail at the scale of a real bitmap's
+  const auto wall = stored(1, big, false, config);
+  const core::Similarity2 truth =
+      core::Similarity2::fromAngleScale(12.0 * std::numbers::pi / 180.0, 1.02, 150.0, 60.0);
+  const Rendered query = renderThrough(big, cv::Mat(), truth, 180, 140, false);
+  const TextureDescription described = describeTexture(query.rgb, query.covered, config);
+  const core::Similarity2 estimate =
+      core::Similarity2::fromAngleScale(12.4 * std::numbers::pi / 180.0, 1.02, 150.7, 59.4);
+  ASSERT_GT(cornerError(estimate, truth, 180, 140), 0.9);
+
+  const std::optional<core::Similarity2> refined = refinedByEcc(described, *wall, estimate);
+  ASSERT_TRUE(refined.has_value());
+  EXPECT_LT(cornerError(*refined, truth, 180, 140), 0.1);
+  const auto psnr = [&](const core::Similarity2& transform) {
+    return measureFidelity(query.rgb, query.covered, renderStored(*wall, transform, 180, 140))
+        .psnr_db;
+  };
+  EXPECT_GT(psnr(*refined), psnr(estimate) + 5.0);
+}
+
 TEST(MatchCascade, ATurnedCropOfAStoredTextureReusesItWithTheRightTransform) {
   cv::setRNGSeed(3);
   const MatchConfig config;

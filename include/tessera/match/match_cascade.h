@@ -95,6 +95,14 @@ std::shared_ptr<StoredTexture> patternTexture(std::int64_t id, const cv::Mat& ti
 Rendered renderStored(const StoredTexture& stored, const core::Similarity2& patch_to_texture,
                       int width, int height);
 
+// `patch_to_texture` (a single texture's, not a pattern's) refined by direct alignment of grey
+// levels: the stored texture rendered onto the patch's grid is aligned with the patch's bitmap
+// (OpenCV's ECC, an affine warp whose nearest similarity is kept), and that small correction
+// goes first. Nothing when the alignment does not converge.
+std::optional<core::Similarity2> refinedByEcc(const TextureDescription& query,
+                                              const StoredTexture& stored,
+                                              const core::Similarity2& patch_to_texture);
+
 // Where candidates come from: the database through its CCV index, or a list in memory.
 class TextureCatalog {
  public:
