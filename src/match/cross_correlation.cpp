@@ -188,67 +188,120 @@ TurnedPeak findTileAtAnyTurn(const cv::Mat& image, const cv::Mat& tile) {
 
 namespace {
 
-// corr(a, b)(d) = sum_p a(p) b(p - d) for every shift d, at index d mod the spectra's size.
-cv::Mat correlate(const cv::Mat& spectrum_a, const cv::Mat& spectrum_b) {
+// A masked image's three spectra for masked NCC against other masked images (Padfield 2012):
+// of the mask m, of the masked image m f and of its squares m f^2, as CCS-packed real DFTs at a
+// size that holds every shift without wrapping. In float, less the masked mean: that changes no
+// NCC and keeps the sums of squares small beside their differences, so scores agree with the
+// direct sum to about 1e-7.
+struct MaskedSpectra {
+  cv::Mat mask, value, square;
+};
+
+MaskedSpectra maskedSpectra(const cv::Mat& image, const cv::Mat& mask, const cv::Size& padded) {
+  cv::Mat m, v;
+  cv::Mat(mask != 0).convertTo(m, CV_32F, 1.0 / 255.0);
+  image.convertTo(v, CV_32F);
+  const double mean = cv::countNonZero(mask) > 0 ? cv::mean(v, mask)[0] : 0.0;
+  v = (v - mean).mul(m);
+  const auto spectrum = [&padded](const cv::Mat& plane) {
+    cv::Mat canvas = cv::Mat::zeros(padded, CV_32FC1), out;
+    plane.copyTo(canvas(cv::Rect(0, 0, plane.cols, plane.rows)));
+    cv::dft(canvas, out, 0, plane.rows);
+    return out;
+  };
+  return {spectrum(m), spectrum(v), spectrum(v.mul(v))};
+}
+
+// corr(a, b)(d) = sum_p a(p) b(p - d) (conjugate) or conv(a, b)(s) = sum_p a(p) b(s - p), for
+// every d (at index d mod the padded size) or s.
+cv::Mat transform(const cv::Mat& spectrum_a, const cv::Mat& spectrum_b, bool conjugate) {
   cv::Mat product, out;
-  cv::mulSpectrums(spectrum_a, spectrum_b, product, 0, /*conjB=*/true);
+  cv::mulSpectrums(spectrum_a, spectrum_b, product, 0, conjugate);
   cv::idft(product, out, cv::DFT_SCALE | cv::DFT_REAL_OUTPUT);
   return out;
 }
 
-cv::Mat spectrum(const cv::Mat& image, const cv::Size& padded) {
-  cv::Mat canvas = cv::Mat::zeros(padded, CV_64FC1);
-  image.convertTo(canvas(cv::Rect(0, 0, image.cols, image.rows)), CV_64F);
-  cv::Mat out;
-  cv::dft(canvas, out, cv::DFT_COMPLEX_OUTPUT);
-  return out;
+// The masked NCC of `moving` (w x h) against the fixed image at every shift with enough common
+// texels, at its own turn (correlations) and half a turn further (convolutions: with R(q) =
+// M(size - 1 - q), corr(F, R)(d) = conv(F, M)(d + size - 1)), so one set of the moving image's
+// spectra serves two turns. `best` keeps the highest; `turns` is the moving image's own turn.
+void bestOverlaps(const MaskedSpectra& fixed, const cv::Size& fixed_size,
+                  const MaskedSpectra& moving, const cv::Size& moving_size, const cv::Size& padded,
+                  double min_overlap, int turns, bool half_turn_too, TurnedPeak& best) {
+  for (const bool half_turn : {false, true}) {
+    if (half_turn && !half_turn_too) break;
+    const bool conjugate = !half_turn;
+    const cv::Mat n = transform(fixed.mask, moving.mask, conjugate);
+    const cv::Mat sf = transform(fixed.value, moving.mask, conjugate);
+    const cv::Mat sg = transform(fixed.mask, moving.value, conjugate);
+    const cv::Mat sff = transform(fixed.square, moving.mask, conjugate);
+    const cv::Mat sgg = transform(fixed.mask, moving.square, conjugate);
+    const cv::Mat sfg = transform(fixed.value, moving.value, conjugate);
+    // Shift d sits at d mod the padded size in a correlation, at d + size - 1 in a convolution.
+    const auto index = [half_turn](int d, int extent, int size) {
+      if (half_turn) return d + extent - 1;
+      return d >= 0 ? d : d + size;
+    };
+    for (int y = -(moving_size.height - 1); y < fixed_size.height; ++y) {
+      const int row = index(y, moving_size.height, padded.height);
+      for (int x = -(moving_size.width - 1); x < fixed_size.width; ++x) {
+        const int col = index(x, moving_size.width, padded.width);
+        const double count = std::round(n.at<float>(row, col));
+        if (count < std::max(2.0, min_overlap)) continue;
+        const double mean_f = sf.at<float>(row, col), mean_g = sg.at<float>(row, col);
+        const double var_f = sff.at<float>(row, col) - mean_f * mean_f / count;
+        const double var_g = sgg.at<float>(row, col) - mean_g * mean_g / count;
+        // Flat overlaps (no structure on one side) are not a placement.
+        const double flat = count * kFlatStdDev * kFlatStdDev;
+        if (var_f <= flat || var_g <= flat) continue;
+        const double score =
+            (sfg.at<float>(row, col) - mean_f * mean_g / count) / std::sqrt(var_f * var_g);
+        if (score > best.peak.score)
+          best = {{x, y, std::min(1.0, score)}, turns + (half_turn ? 2 : 0)};
+      }
+    }
+  }
+}
+
+void requireMasks(const cv::Mat& fixed, const cv::Mat& fixed_mask, const cv::Mat& moving,
+                  const cv::Mat& moving_mask, const char* function) {
+  requireGrey(fixed, function, "fixed image");
+  requireGrey(moving, function, "moving image");
+  if (fixed_mask.size() != fixed.size() || moving_mask.size() != moving.size()) {
+    throw core::Error(fmt::format("{}: each mask must have its image's size", function));
+  }
 }
 
 }  // namespace
 
 CorrelationPeak findOverlap(const cv::Mat& fixed, const cv::Mat& fixed_mask, const cv::Mat& moving,
                             const cv::Mat& moving_mask, double min_overlap) {
-  requireGrey(fixed, "findOverlap", "fixed image");
-  requireGrey(moving, "findOverlap", "moving image");
-  if (fixed_mask.size() != fixed.size() || moving_mask.size() != moving.size()) {
-    throw core::Error("findOverlap: each mask must have its image's size");
-  }
+  requireMasks(fixed, fixed_mask, moving, moving_mask, "findOverlap");
   // Every shift from the moving image's bottom-right touching the fixed one's top-left to its
   // top-left touching the bottom-right, without wrapping onto another.
   const cv::Size padded(cv::getOptimalDFTSize(fixed.cols + moving.cols - 1),
                         cv::getOptimalDFTSize(fixed.rows + moving.rows - 1));
-  cv::Mat mf, mg;
-  cv::Mat(fixed_mask != 0).convertTo(mf, CV_64F, 1.0 / 255.0);
-  cv::Mat(moving_mask != 0).convertTo(mg, CV_64F, 1.0 / 255.0);
-  cv::Mat f, g;
-  fixed.convertTo(f, CV_64F);
-  moving.convertTo(g, CV_64F);
-  f = f.mul(mf), g = g.mul(mg);
-  const cv::Mat F_m = spectrum(mf, padded), G_m = spectrum(mg, padded);
-  const cv::Mat F = spectrum(f, padded), G = spectrum(g, padded);
-  const cv::Mat F2 = spectrum(f.mul(f), padded), G2 = spectrum(g.mul(g), padded);
-  const cv::Mat n = correlate(F_m, G_m);
-  const cv::Mat sf = correlate(F, G_m), sg = correlate(F_m, G);
-  const cv::Mat sff = correlate(F2, G_m), sgg = correlate(F_m, G2);
-  const cv::Mat sfg = correlate(F, G);
-  CorrelationPeak best;
-  const auto index = [](int d, int size) { return d >= 0 ? d : d + size; };
-  for (int y = -(moving.rows - 1); y < fixed.rows; ++y) {
-    const int row = index(y, padded.height);
-    for (int x = -(moving.cols - 1); x < fixed.cols; ++x) {
-      const int col = index(x, padded.width);
-      const double count = std::round(n.at<double>(row, col));
-      if (count < std::max(2.0, min_overlap)) continue;
-      const double mean_f = sf.at<double>(row, col), mean_g = sg.at<double>(row, col);
-      const double var_f = sff.at<double>(row, col) - mean_f * mean_f / count;
-      const double var_g = sgg.at<double>(row, col) - mean_g * mean_g / count;
-      // Flat overlaps (no structure on one side) are not a placement.
-      const double flat = count * kFlatStdDev * kFlatStdDev;
-      if (var_f <= flat || var_g <= flat) continue;
-      const double score =
-          (sfg.at<double>(row, col) - mean_f * mean_g / count) / std::sqrt(var_f * var_g);
-      if (score > best.score) best = {x, y, std::min(1.0, score)};
-    }
+  const MaskedSpectra f = maskedSpectra(fixed, fixed_mask, padded);
+  const MaskedSpectra g = maskedSpectra(moving, moving_mask, padded);
+  TurnedPeak best;
+  bestOverlaps(f, fixed.size(), g, moving.size(), padded, min_overlap, 0, false, best);
+  return best.peak;
+}
+
+TurnedPeak findOverlapAtAnyTurn(const cv::Mat& fixed, const cv::Mat& fixed_mask,
+                                const cv::Mat& moving, const cv::Mat& moving_mask,
+                                double min_overlap) {
+  requireMasks(fixed, fixed_mask, moving, moving_mask, "findOverlapAtAnyTurn");
+  // One padded size for the moving image upright and on its side.
+  const int reach = std::max(moving.cols, moving.rows) - 1;
+  const cv::Size padded(cv::getOptimalDFTSize(fixed.cols + reach),
+                        cv::getOptimalDFTSize(fixed.rows + reach));
+  const MaskedSpectra f = maskedSpectra(fixed, fixed_mask, padded);
+  TurnedPeak best;
+  for (int turns = 0; turns < 2; ++turns) {
+    const cv::Mat g = turned(moving, turns), g_mask = turned(moving_mask, turns);
+    bestOverlaps(f, fixed.size(), maskedSpectra(g, g_mask, padded), g.size(), padded, min_overlap,
+                 turns, true, best);
   }
   return best;
 }

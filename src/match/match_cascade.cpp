@@ -59,13 +59,9 @@ TurnedPeak findPartialOverlap(const cv::Mat& query_grey, const cv::Mat& query_ma
                                                          cv::countNonZero(full_stored_mask));
   const cv::Mat q = small(query_grey, cv::INTER_AREA);
   const cv::Mat qm = small(full_query_mask, cv::INTER_NEAREST);
-  TurnedPeak best;
-  for (int turns = 0; turns < 4; ++turns) {
-    const CorrelationPeak peak =
-        findOverlap(q, qm, small(turned(stored_grey, turns), cv::INTER_AREA),
-                    small(turned(full_stored_mask, turns), cv::INTER_NEAREST), min_overlap * f * f);
-    if (peak.score > best.peak.score) best = {peak, turns};
-  }
+  TurnedPeak best =
+      findOverlapAtAnyTurn(q, qm, small(stored_grey, cv::INTER_AREA),
+                           small(full_stored_mask, cv::INTER_NEAREST), min_overlap * f * f);
   if (best.peak.score <= -1.0 || f >= 1.0) return best;
   const CorrelationPeak start{static_cast<int>(std::lround(best.peak.x / f)),
                               static_cast<int>(std::lround(best.peak.y / f)), best.peak.score};

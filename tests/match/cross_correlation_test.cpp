@@ -187,6 +187,31 @@ TEST(CrossCorrelation, TwoCropsThatOverlapInPartAreRegisteredOverTheirCommonTexe
   EXPECT_EQ(findOverlap(a, mask_a, b, mask_b, 1e6).score, -1.0);
 }
 
+TEST(CrossCorrelation, AnOverlapIsFoundAtEveryQuarterTurnAsOnTheTurnedImage) {
+  // The second crop stored turned: each turn is found with the shift and score that the search
+  // of the image turned back gives, although two turns share one set of DFTs.
+  std::mt19937 random(31);
+  const cv::Mat big = randomTexture(150, 110, random);
+  const cv::Mat a = big(cv::Rect(0, 0, 100, 70)).clone();
+  const cv::Mat b = big(cv::Rect(37, 22, 90, 80)).clone();
+  const cv::Mat mask_a(a.size(), CV_8UC1, cv::Scalar(255));
+  cv::Mat mask_b(b.size(), CV_8UC1, cv::Scalar(255));
+  cv::circle(mask_b, {20, 60}, 12, cv::Scalar(0), cv::FILLED);
+  for (int turns = 0; turns < 4; ++turns) {
+    // b stored turned back by `turns`: turning it by `turns` gives b upright.
+    const cv::Mat stored = turned(b, (4 - turns) % 4),
+                  stored_mask = turned(mask_b, (4 - turns) % 4);
+    const TurnedPeak found = findOverlapAtAnyTurn(a, mask_a, stored, stored_mask, 1000.0);
+    EXPECT_EQ(found.turns, turns);
+    EXPECT_EQ(found.peak.x, 37) << turns;
+    EXPECT_EQ(found.peak.y, 22) << turns;
+    const CorrelationPeak direct = findOverlap(a, mask_a, b, mask_b, 1000.0);
+    EXPECT_NEAR(found.peak.score, direct.score, 1e-5) << turns;
+    EXPECT_GT(found.peak.score, 0.999) << turns;
+  }
+  EXPECT_EQ(findOverlapAtAnyTurn(a, mask_a, b, mask_b, 1e6).peak.score, -1.0);
+}
+
 TEST(CrossCorrelation, BadInputsThrow) {
   const cv::Mat small(8, 8, CV_32FC1, cv::Scalar(0.0F)), large(9, 8, CV_32FC1, cv::Scalar(0.0F));
   EXPECT_THROW(normalisedCrossCorrelation(small, large), core::Error);

@@ -46,6 +46,13 @@ TurnedPeak findTileAtAnyTurn(const cv::Mat& image, const cv::Mat& tile);
 CorrelationPeak findOverlap(const cv::Mat& fixed, const cv::Mat& fixed_mask, const cv::Mat& moving,
                             const cv::Mat& moving_mask, double min_overlap);
 
+// findOverlap's best placement of `moving` turned by 0 to 3 quarter turns (turned(); the
+// turn's mask with it): the fixed image's spectra are taken once, and each set of the moving
+// image's serves two turns, half a turn apart. A score of -1 when no turn has a placement.
+TurnedPeak findOverlapAtAnyTurn(const cv::Mat& fixed, const cv::Mat& fixed_mask,
+                                const cv::Mat& moving, const cv::Mat& moving_mask,
+                                double min_overlap);
+
 // The same score computed directly at the shifts within `radius` of `start` (each costs the
 // overlap's texels): a shift found on scaled-down images, made exact at full size.
 CorrelationPeak refineOverlap(const cv::Mat& fixed, const cv::Mat& fixed_mask,
