@@ -259,8 +259,11 @@ std::optional<core::Similarity2> MatchCascade::findPattern(const TextureDescript
 
 std::optional<core::Similarity2> refinedByEcc(const TextureDescription& query,
                                               const StoredTexture& stored,
-                                              const core::Similarity2& patch_to_texture) {
-  const Rendered render = renderStored(stored, patch_to_texture, query.rgb.cols, query.rgb.rows);
+                                              const core::Similarity2& patch_to_texture,
+                                              const Rendered* rendered) {
+  const Rendered render =
+      rendered != nullptr ? *rendered
+                          : renderStored(stored, patch_to_texture, query.rgb.cols, query.rgb.rows);
   cv::Mat both;
   cv::bitwise_and(query.mask, render.covered, both);
   const cv::Mat query_grey = greyForCorrelation(query.rgb, both);
@@ -317,7 +320,7 @@ CandidateVerdict MatchCascade::tryCandidate(const TextureDescription& query,
   // texture in place of the patch's, so what is left of the misplacement is what the view loses
   // (the office's second table: 3.0 dB of view PSNR on its pixels at the estimate, 2.0 refined).
   if (verdict.accepted && !stored.pattern) {
-    if (const auto refined = refinedByEcc(query, stored, *transform)) {
+    if (const auto refined = refinedByEcc(query, stored, *transform, &render)) {
       const Fidelity better = measureFidelity(
           query.rgb, query.mask, renderStored(stored, *refined, query.rgb.cols, query.rgb.rows));
       spdlog::debug("candidate {}: ECC {:.2f} -> {:.2f} dB, coverage {:.3f} -> {:.3f}", stored.id,

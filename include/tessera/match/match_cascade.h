@@ -98,10 +98,12 @@ Rendered renderStored(const StoredTexture& stored, const core::Similarity2& patc
 // `patch_to_texture` (a single texture's, not a pattern's) refined by direct alignment of grey
 // levels: the stored texture rendered onto the patch's grid is aligned with the patch's bitmap
 // (OpenCV's ECC, an affine warp whose nearest similarity is kept), and that small correction
-// goes first. Nothing when the alignment does not converge.
+// goes first. Nothing when the alignment does not converge. `rendered`, when given, is that
+// render already made (renderStored at `patch_to_texture` and the query's size).
 std::optional<core::Similarity2> refinedByEcc(const TextureDescription& query,
                                               const StoredTexture& stored,
-                                              const core::Similarity2& patch_to_texture);
+                                              const core::Similarity2& patch_to_texture,
+                                              const Rendered* rendered = nullptr);
 
 // Where candidates come from: the database through its CCV index, or a list in memory.
 class TextureCatalog {
