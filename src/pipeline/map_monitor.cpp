@@ -221,7 +221,9 @@ std::string toPrometheus(const MonitorSnapshot& s) {
   }
   e.one("tessera_resident_bytes", "gauge", "Resident memory of the process", f.rss_mb * 1e6);
   e.one("tessera_tsdf_bytes", "gauge", "Memory of the TSDF volume", count(f.figures.tsdf_bytes));
-  e.one("tessera_bitmap_bytes", "gauge", "Patch bitmaps held in memory", count(f.bitmap_bytes));
+  e.one("tessera_bitmap_bytes", "gauge",
+        "Patch bitmaps of the map, 3 bytes per texel (written to OUT/textures, not held in memory)",
+        count(f.bitmap_bytes));
   e.one("tessera_map_bytes", "gauge", "The map's size: TSDF plus bitmaps", count(f.map_bytes));
   e.family("tessera_patches", "gauge", "Patches by state");
   e.sample("tessera_patches", count(f.figures.patches_live), "state=\"live\"");

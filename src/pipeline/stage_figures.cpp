@@ -103,6 +103,7 @@ void IntegrationFigures::addTo(json& report) const {
 void PlaneFigures::addTo(json& report) const {
   report["patches_finalized"] = patches_finalized;
   report["patch_finalizations"] = patch_finalizations;
+  report["patch_finalizations_by_reason"] = finalizations_by_reason;
   report["patches_retired"] = patches_retired;
   report["colour_samples"] = colour_samples;
   report["colour_sample_bytes"] = colour_sample_bytes;

@@ -351,8 +351,12 @@ std::optional<Eigen::Vector3f> PlaneStage::sampleColours(
 
 void PlaneStage::count(const std::vector<planes::PatchEvent>& events) {
   for (const planes::PatchEvent& event : events) {
-    (event.kind == planes::PatchEvent::Kind::kFinalized ? figures_.patch_finalizations
-                                                        : figures_.patches_retired)++;
+    if (event.kind == planes::PatchEvent::Kind::kFinalized) {
+      ++figures_.patch_finalizations;
+      ++figures_.finalizations_by_reason[event.reason];
+    } else {
+      ++figures_.patches_retired;
+    }
   }
 }
 

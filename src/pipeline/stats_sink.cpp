@@ -143,7 +143,7 @@ void StatsSink::writePatchEvents(const std::vector<planes::PatchEvent>& events) 
                            {"id", event.id},
                            {"version", event.version},
                            {"frames_done", frames_done_}};
-    if (finalized) line["area_m2"] = event.area_m2;
+    if (finalized) line["area_m2"] = event.area_m2, line["reason"] = event.reason;
     stats_ << line.dump() << '\n';
   }
 }

@@ -10,12 +10,12 @@
 
 namespace tessera::planes {
 
-void PatchMap::finalize(Patch& patch, std::vector<PatchEvent>& events) const {
+void PatchMap::finalize(Patch& patch, std::vector<PatchEvent>& events, const char* reason) const {
   patch.version += 1;
   patch.finalized = true;
   patch.finalized_area_m2 = areaM2(patch);
   events.push_back(
-      {PatchEvent::Kind::kFinalized, patch.id, patch.version, patch.finalized_area_m2});
+      {PatchEvent::Kind::kFinalized, patch.id, patch.version, patch.finalized_area_m2, reason});
 }
 
 std::vector<PatchEvent> PatchMap::endFrame(long frame_index) {
@@ -25,7 +25,9 @@ std::vector<PatchEvent> PatchMap::endFrame(long frame_index) {
     const double area = areaM2(patch);
     if (seen_this_frame_.count(patch.id) == 0) {
       const bool gone_long = frame_index - patch.last_seen_frame >= config_.out_of_view_frames;
-      if (!patch.finalized && gone_long && area >= config_.min_area_m2) finalize(patch, events);
+      if (!patch.finalized && gone_long && area >= config_.min_area_m2) {
+        finalize(patch, events, "out of view");
+      }
       continue;
     }
     patch.last_seen_frame = frame_index;
@@ -40,7 +42,8 @@ std::vector<PatchEvent> PatchMap::endFrame(long frame_index) {
     const bool stable =
         patch.area_in_view.size() > static_cast<std::size_t>(config_.stable_frames) &&
         area <= patch.area_in_view.front() * (1.0 + config_.max_growth);
-    if (!patch.finalized && stable && area >= config_.min_area_m2) finalize(patch, events);
+    if (!patch.finalized && stable && area >= config_.min_area_m2)
+      finalize(patch, events, "stable");
   }
   seen_this_frame_.clear();
   return events;
@@ -99,7 +102,9 @@ std::vector<PatchEvent> PatchMap::finalizeAll() {
   std::vector<PatchEvent> events = std::move(pending_);
   pending_.clear();
   for (auto& [id, patch] : patches_) {
-    if (!patch.finalized && areaM2(patch) >= config_.min_area_m2) finalize(patch, events);
+    if (!patch.finalized && areaM2(patch) >= config_.min_area_m2) {
+      finalize(patch, events, "end of stream");
+    }
   }
   return events;
 }

@@ -253,6 +253,7 @@ TEST(PatchLifecycle, AGrowingPatchIsFinalizedOnceItStopsGrowing) {
     const auto events = finalizations(map.endFrame(frame));
     if (!events.empty() && finalized_at < 0) finalized_at = frame;
     EXPECT_LE(events.size(), 1u);
+    for (const PatchEvent& e : events) EXPECT_STREQ(e.reason, "stable");
   }
   // Last growth at frame 19; ten frames later its area has not grown over ten frames in view.
   EXPECT_EQ(finalized_at, 29);
@@ -269,6 +270,13 @@ TEST(PatchLifecycle, APatchOutOfViewIsFinalizedAfterTheConfiguredFrames) {
   const auto events = finalizations(map.endFrame(15));
   ASSERT_EQ(events.size(), 1u);
   EXPECT_EQ(events.front().version, 1);
+  EXPECT_STREQ(events.front().reason, "out of view");
+  // One seen on the last frame and not yet stable is finalized by the end of the stream.
+  map.add({strip(3.0, 4.0, 0.0, 1.0, 0.75)});
+  EXPECT_TRUE(finalizations(map.endFrame(16)).empty());
+  const auto at_end = finalizations(map.finalizeAll());
+  ASSERT_EQ(at_end.size(), 1u);
+  EXPECT_STREQ(at_end.front().reason, "end of stream");
 }
 
 TEST(PatchLifecycle, APatchThatGrowsAfterFinalizationGetsANewVersionNotADuplicate) {

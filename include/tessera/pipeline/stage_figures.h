@@ -3,6 +3,7 @@
 // struct writes its own keys: a frame's into its stats.jsonl line, a stage's totals into
 // report.json (docs/METRICS.md). The monitor and the run's summary hold the same structs.
 #include <cstddef>
+#include <map>
 #include <optional>
 #include <string>
 #include <vector>
@@ -112,6 +113,7 @@ struct IntegrationFigures {
 struct PlaneFigures {
   std::size_t patches_finalized = 0;    // in the map (OUT/patches.obj)
   std::size_t patch_finalizations = 0;  // every finalization, later versions included
+  std::map<std::string, std::size_t> finalizations_by_reason;  // PatchEvent::reason -> count
   std::size_t patches_retired = 0;      // finalized, then merged into another patch
   std::size_t colour_samples = 0;       // held by all patches
   std::size_t colour_sample_bytes = 0;

@@ -212,6 +212,9 @@ struct PatchEvent {
   int id;
   int version;
   double area_m2 = 0.0;  // of the finalized version
+  // Why a patch was finalized: "stable" (in view, stopped growing), "out of view" (unseen for
+  // out_of_view_frames) or "end of stream"; empty for a retirement.
+  const char* reason = "";
 };
 
 class PatchMap {
@@ -318,7 +321,7 @@ class PatchMap {
   Patch& patchWithId(int id);
   // The plane's tiles, in id order.
   std::vector<Patch*> tilesOf(const Plane& plane);
-  void finalize(Patch& patch, std::vector<PatchEvent>& events) const;
+  void finalize(Patch& patch, std::vector<PatchEvent>& events, const char* reason) const;
   // Loads a released patch's samples back (a region continues it).
   void restoreSamples(Patch& patch) const;
 
