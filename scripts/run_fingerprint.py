@@ -19,7 +19,8 @@ import sys
 # two runs of the same binary.
 TIMING_KEYS = {
     "wall_s", "fps", "peak_rss_mb", "rss_growth_mb_per_1000_frames", "latency_ms_p50",
-    "latency_ms_p95", "commit_latency_ms_p50", "commit_latency_ms_p95", "db_commit_ms_p50",
+    "latency_ms_p95", "commit_latency_ms_p50", "commit_latency_ms_p95", "describe_queued_ms_p50",
+    "describe_queued_ms_p95", "commit_queued_ms_p50", "commit_queued_ms_p95", "db_commit_ms_p50",
     "db_commit_ms_p95", "match_ms_p50", "bitmap_ms_per_m2", "pose_graph_ms", "loop_keyframe_ms",
     "loop_keyframe_cpu_ms", "loop_information_ms", "loop_place_lookup_ms", "loop_place_index_ms",
     "loop_verification_ms", "loop_wait_s", "stages", "db", "source", "cpu_s_stream", "cpu_ms_per_frame",

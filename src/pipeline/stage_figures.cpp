@@ -40,6 +40,8 @@ void PatchCommitFigures::addTo(json& line) const {
   line["precheck_ms"] = precheck_ms;
   line["pattern_ms"] = pattern_ms;
   line["commit_latency_ms"] = commit_latency_ms;
+  line["describe_queued_ms"] = describe_queued_ms;
+  line["commit_queued_ms"] = commit_queued_ms;
   line["ccv_considered"] = ccv_considered;
   line["ccv_removed"] = ccv_removed;
 }
@@ -132,6 +134,10 @@ void CommitFigures::addTo(json& report) const {
   report["ccv_rejection"] = orNull(ratio(ccv_removed, ccv_considered));
   report["commit_latency_ms_p50"] = orNull(commit_latencies_ms.quantile(0.50));
   report["commit_latency_ms_p95"] = orNull(commit_latencies_ms.quantile(0.95));
+  report["describe_queued_ms_p50"] = orNull(describe_queued_ms.quantile(0.50));
+  report["describe_queued_ms_p95"] = orNull(describe_queued_ms.quantile(0.95));
+  report["commit_queued_ms_p50"] = orNull(commit_queued_ms.quantile(0.50));
+  report["commit_queued_ms_p95"] = orNull(commit_queued_ms.quantile(0.95));
   report["db_commit_ms_p50"] = orNull(store_commit_ms.quantile(0.50));
   report["db_commit_ms_p95"] = orNull(store_commit_ms.quantile(0.95));
   report["match_ms_p50"] = match.count() > 0 ? json(match.medianMs()) : json(nullptr);

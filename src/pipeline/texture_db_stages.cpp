@@ -43,8 +43,11 @@ cv::Mat validTexels(const texture::PatchBitmap& bitmap) {
 
 DescribedPatch DescribeStage::process(const PatchJob& job) const {
   const double cpu_start_s = core::threadCpuSeconds();
+  const double queued_ms = msSince(job.finalized_at);
   DescribedPatch described = describe(job);
   described.cpu_ms = 1e3 * (core::threadCpuSeconds() - cpu_start_s);
+  described.queued_ms = queued_ms;
+  described.described_at = std::chrono::steady_clock::now();
   return described;
 }
 
@@ -125,6 +128,7 @@ CommitStage::CommitStage(db::TextureStore& store, reuse::StoreCatalog& catalog,
 
 CommitRecord CommitStage::process(DescribedPatch described) {
   ScopedStageTime time(timer_);
+  const double commit_queued_ms = msSince(described.described_at);
   CommitRecord record;
   if (!described.bitmap) {  // the map shows the patch no more: its bitmap is not current
     shown_.erase(described.patch_id);
@@ -137,6 +141,8 @@ CommitRecord CommitStage::process(DescribedPatch described) {
   figures.bitmap_ms = bitmap.build_ms;
   figures.describe_ms = described.describe_ms;
   figures.pattern_ms = described.pattern_ms;
+  figures.describe_queued_ms = described.queued_ms;
+  figures.commit_queued_ms = commit_queued_ms;
   figures_.describe.add(figures.bitmap_ms + figures.describe_ms + figures.pattern_ms,
                         described.cpu_ms);
   // Until it is committed, the map shows the patch's own bitmap.
@@ -200,6 +206,8 @@ CommitRecord CommitStage::process(DescribedPatch described) {
   record.overlays.assign(commit.instances.begin() + 1, commit.instances.end());
   figures.commit_latency_ms = msSince(described.finalized_at);
   figures_.commit_latencies_ms.add(figures.commit_latency_ms);
+  figures_.describe_queued_ms.add(figures.describe_queued_ms);
+  figures_.commit_queued_ms.add(figures.commit_queued_ms);
   return record;
 }
 

@@ -238,6 +238,9 @@ TEST(Pipeline, RunsEveryGoodFrameAndWritesTheOutputs) {
                           "ccv_rejection",
                           "commit_latency_ms_p50",
                           "commit_latency_ms_p95",
+                          "describe_queued_ms_p95",
+                          "commit_queued_ms_p95",
+                          "patch_finalizations_by_reason",
                           "cpu_s_stream",
                           "cpu_ms_per_frame",
                           "cpu_s_end_of_stream",
@@ -260,6 +263,20 @@ TEST(Pipeline, RunsEveryGoodFrameAndWritesTheOutputs) {
                   report["cpu_s_finish"].get<double>(),
               1e-9);
   EXPECT_GT(report["stages"]["tracking"]["cpu_ms_mean"].get<double>(), 0.0);
+  // Each commit's waits are parts of its latency.
+  std::ifstream stats(out / "stats.jsonl");
+  int commits = 0;
+  for (std::string text; std::getline(stats, text);) {
+    const auto entry = nlohmann::json::parse(text);
+    if (entry.value("event", "") != "committed") continue;
+    ++commits;
+    const double queued = entry["describe_queued_ms"], waited = entry["commit_queued_ms"];
+    EXPECT_GE(queued, 0.0);
+    EXPECT_GE(waited, 0.0);
+    EXPECT_LE(queued + waited, entry["commit_latency_ms"].get<double>());
+  }
+  EXPECT_GT(commits, 0);
+  EXPECT_EQ(commits, report["textures_stored"].get<int>());
 }
 
 TEST(Pipeline, EveryOtherFrameIsIntegratedAndEveryFrameIsPosed) {

@@ -44,6 +44,8 @@ struct PatchCommitFigures {
   double bitmap_ms = 0.0, describe_ms = 0.0, match_ms = 0.0, pattern_ms = 0.0;
   double precheck_ms = 0.0;        // the cascade ahead of the commit, on a describing thread
   double commit_latency_ms = 0.0;  // finalization to commit
+  // Of it, waiting: for a describing thread, and (described) for the serial commit.
+  double describe_queued_ms = 0.0, commit_queued_ms = 0.0;
   std::size_t ccv_considered = 0, ccv_removed = 0;
   void addTo(nlohmann::json& line) const;
 };
@@ -143,6 +145,7 @@ struct CommitFigures {
   std::size_t retirements = 0;  // patches merged into another: their instances removed
   std::size_t ccv_considered = 0, ccv_removed = 0;
   core::Quantiles commit_latencies_ms;  // finalization to commit, per committed patch
+  core::Quantiles describe_queued_ms, commit_queued_ms;  // the waits within it
   core::Quantiles store_commit_ms;      // TextureStore::commit calls alone
   StageTimer match;                     // matching and layer planning, per patch
   StageTimer describe;                  // bitmap, description and pattern, per patch

@@ -64,7 +64,9 @@ struct DescribedPatch {
   double describe_ms = 0.0;                 // CCV and features of the new bitmap
   double pattern_ms = 0.0;                  // the autocorrelation analysis
   double cpu_ms = 0.0;                      // all of it, on the describing thread
+  double queued_ms = 0.0;  // finalization to the start of its description (a thread free)
   SteadyTime finalized_at;
+  SteadyTime described_at;  // its description done: from here it waits for the serial commit
 
   struct Batch {
     std::size_t index = 0, size = 0;
