@@ -27,15 +27,21 @@ class SampleBuckets {
               std::vector<double>& distance2);
 
  private:
-  std::vector<Eigen::Vector2d> positions_;  // per sample, as doubles (as the distances are)
+  // The kept samples in bucket order (by index within a bucket), so that a lookup reads each
+  // row of its buckets as one contiguous run; positions as doubles, as the distances are.
+  struct Kept {
+    double u, v;
+    int index;
+  };
+  std::vector<Kept> kept_;
   double radius_ = 0.0, radius2_ = 0.0;
   double side_ = 1.0;  // the buckets' side, at least the radius
   Eigen::Vector2d origin_ = Eigen::Vector2d::Zero();
   long columns_ = 0, rows_ = 0;
-  // Bucket b holds the samples order_[first_[b]] .. order_[first_[b + 1] - 1].
+  // Bucket b holds the samples kept_[first_[b]] .. kept_[first_[b + 1] - 1].
   std::vector<std::uint32_t> first_;
-  std::vector<int> order_;
-  std::vector<std::pair<double, int>> found_;  // a lookup's candidates, kept between lookups
+  // A lookup's candidates, those within the radius first; kept between lookups.
+  std::vector<std::pair<double, int>> found_;
 };
 
 }  // namespace tessera::texture
