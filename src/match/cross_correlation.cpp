@@ -84,12 +84,14 @@ class TileCorrelator {
     // Sum of the zero-mean tile's squares: its variance times its texels.
     const double tile_energy = tile_std[0] * tile_std[0] * static_cast<double>(tile.total());
     const cv::Rect at_origin(cv::Point(), valid);
-    cv::Mat first = normalise(transform(tile_spectrum, /*conjugate=*/true, valid.height)(at_origin),
-                              tile.size(), tile_energy);
+    // The windows' spreads are the same for both maps: worked out once.
+    const cv::Mat spread = spreads(tile.size(), tile_energy);
+    cv::Mat first =
+        normalise(transform(tile_spectrum, /*conjugate=*/true, valid.height)(at_origin), spread);
     if (!half_turn_too) return {first, {}};
     const cv::Rect further_on(cv::Point(tile.cols - 1, tile.rows - 1), valid);
-    return {first, normalise(transform(tile_spectrum, false, image_size_.height)(further_on),
-                             tile.size(), tile_energy)};
+    return {first,
+            normalise(transform(tile_spectrum, false, image_size_.height)(further_on), spread)};
   }
 
  private:
@@ -102,27 +104,41 @@ class TileCorrelator {
     return out;
   }
 
-  // Correlation over each window's spread times the tile's: the window's sum of squared
-  // deviations from the integral images, in double. Flat windows score 0.
-  cv::Mat normalise(const cv::Mat& correlation, const cv::Size& tile_size,
-                    double tile_energy) const {
-    cv::Mat ncc(correlation.size(), CV_32FC1);
+  // Each window's spread times the tile's, sqrt(window variance x area x tile energy), from the
+  // integral images in double; 0 for a flat window (then it scores 0).
+  cv::Mat spreads(const cv::Size& tile_size, double tile_energy) const {
+    const cv::Size valid(image_size_.width - tile_size.width + 1,
+                         image_size_.height - tile_size.height + 1);
+    cv::Mat spread(valid, CV_64FC1);
     const double area = static_cast<double>(tile_size.area());
     const double min_variance = kFlatStdDev * kFlatStdDev;
-    for (int y = 0; y < ncc.rows; ++y) {
-      auto* out = ncc.ptr<float>(y);
-      const auto* in = correlation.ptr<float>(y);
+    for (int y = 0; y < valid.height; ++y) {
+      auto* out = spread.ptr<double>(y);
       const auto* s0 = sum_.ptr<double>(y);
       const auto* s1 = sum_.ptr<double>(y + tile_size.height);
       const auto* q0 = square_sum_.ptr<double>(y);
       const auto* q1 = square_sum_.ptr<double>(y + tile_size.height);
-      for (int x = 0; x < ncc.cols; ++x) {
+      for (int x = 0; x < valid.width; ++x) {
         const int x1 = x + tile_size.width;
         const double sum = s1[x1] - s1[x] - s0[x1] + s0[x];
         const double variance =
             (q1[x1] - q1[x] - q0[x1] + q0[x]) / area - (sum / area) * (sum / area);
-        const double score = in[x] / std::sqrt(variance * area * tile_energy);
-        out[x] = variance < min_variance || !std::isfinite(score)
+        out[x] = variance < min_variance ? 0.0 : std::sqrt(variance * area * tile_energy);
+      }
+    }
+    return spread;
+  }
+
+  // Correlation over the windows' spreads (spreads()): the NCC, clamped to [-1, 1].
+  static cv::Mat normalise(const cv::Mat& correlation, const cv::Mat& spread) {
+    cv::Mat ncc(correlation.size(), CV_32FC1);
+    for (int y = 0; y < ncc.rows; ++y) {
+      auto* out = ncc.ptr<float>(y);
+      const auto* in = correlation.ptr<float>(y);
+      const auto* by = spread.ptr<double>(y);
+      for (int x = 0; x < ncc.cols; ++x) {
+        const double score = in[x] / by[x];
+        out[x] = by[x] == 0.0 || !std::isfinite(score)
                      ? 0.0F
                      : static_cast<float>(std::clamp(score, -1.0, 1.0));
       }
@@ -172,8 +188,10 @@ cv::Mat turned(const cv::Mat& image, int turns) {
 TurnedPeak findTileAtAnyTurn(const cv::Mat& image, const cv::Mat& tile) {
   requireGrey(image, "findTileAtAnyTurn", "image");
   requireGrey(tile, "findTileAtAnyTurn", "tile");
-  const TileCorrelator correlator(image);
   TurnedPeak best;
+  // Neither way round inside: nothing to correlate, and no reason to transform the image.
+  if (!fitsInside(tile, image) && (tile.rows > image.cols || tile.cols > image.rows)) return best;
+  const TileCorrelator correlator(image);
   // Turns 0 and 2 from one DFT of the tile, 1 and 3 (= 1 then half round) from another.
   for (int turns = 0; turns < 2; ++turns) {
     const cv::Mat tile_turned = turned(tile, turns);
