@@ -110,22 +110,36 @@ void ColourSamples::add(const ColourSample& sample) {
 
 void ColourSamples::add(float u, float v, const std::array<std::uint8_t, 3>& rgb, float weight,
                         std::int32_t view) {
+  blend(locate(u, v, view), rgb, weight);
+}
+
+ColourSamples::Slot ColourSamples::locate(float u, float v, std::int32_t view) {
   const float cell_u = u * inverse_cell_, cell_v = v * inverse_cell_;
   const int cu = static_cast<int>(std::floor(cell_u));
   const int cv = static_cast<int>(std::floor(cell_v));
   static_assert(kTileCells == 1 << kTileShift);
   Tile& tile = tileAt(cu >> kTileShift, cv >> kTileShift);
   Layer& layer = layerOf(tile, last_key_, view);
+  Slot slot;
+  slot.tile = &tile;
+  slot.layer = static_cast<std::uint32_t>(&layer - tile.data());
+  slot.cell = static_cast<std::uint32_t>((cv & kCellMask) * kTileCells + (cu & kCellMask));
+  slot.at_u = cell_u - static_cast<float>(cu);
+  slot.at_v = cell_v - static_cast<float>(cv);
+  __builtin_prefetch(&layer.cells[slot.cell], 1);
+  return slot;
+}
+
+void ColourSamples::blend(const Slot& slot, const std::array<std::uint8_t, 3>& rgb, float weight) {
+  Layer& layer = (*slot.tile)[slot.layer];
   layer.weight += weight;
-  Cell& cell =
-      layer.cells[static_cast<std::size_t>((cv & kCellMask) * kTileCells + (cu & kCellMask))];
-  const float at_u = cell_u - static_cast<float>(cu), at_v = cell_v - static_cast<float>(cv);
+  Cell& cell = layer.cells[slot.cell];
   if (cell.weight <= 0.0F) {
     ++size_;
     ++layer.filled;
     cell.weight = weight;
     for (int c = 0; c < 3; ++c) cell.rgb[c] = fixed88(rgb[c]);
-    cell.at = {fraction255(at_u), fraction255(at_v)};
+    cell.at = {fraction255(slot.at_u), fraction255(slot.at_v)};
     return;
   }
   // Running weighted mean: m += w / (W + w) * (x - m).
@@ -136,8 +150,8 @@ void ColourSamples::add(float u, float v, const std::array<std::uint8_t, 3>& rgb
     cell.rgb[c] = fixed88(mean + share * (static_cast<float>(rgb[c]) - mean));
   }
   const float mean_u = cell.at[0] / 255.0F, mean_v = cell.at[1] / 255.0F;
-  cell.at = {fraction255(mean_u + share * (at_u - mean_u)),
-             fraction255(mean_v + share * (at_v - mean_v))};
+  cell.at = {fraction255(mean_u + share * (slot.at_u - mean_u)),
+             fraction255(mean_v + share * (slot.at_v - mean_v))};
 }
 
 std::optional<Eigen::Vector3f> ColourSamples::colourAt(float u, float v) const {

@@ -306,17 +306,36 @@ std::optional<Eigen::Vector3f> PatchMap::addColours(
     gain = last_gain_;
   }
 
-  // Pass two: the samples, weighted by their view and the frame's sharpness.
+  // Pass two: the samples, weighted by their view and the frame's sharpness. Each pixel's cell
+  // is located (and its memory fetched) kAhead pixels before it is blended, in the same order:
+  // the blends wait on memory far less, and every cell sees them as add() one by one would.
   const auto frame_weight = static_cast<float>(std::max(sharpness, 1e-6));
   const auto view = static_cast<std::int32_t>(frame.index);
+  struct Pending {
+    ColourSamples* samples = nullptr;
+    ColourSamples::Slot slot;
+    std::array<std::uint8_t, 3> colour{};
+    float weight = 0.0F;
+  };
+  constexpr std::size_t kAhead = 16;
+  std::array<Pending, kAhead> pending;
+  std::size_t queued = 0;  // pixels located; those before queued - kAhead are blended
+  const auto blendPixel = [&](std::size_t i) {
+    const Pending& at = pending[i % kAhead];
+    at.samples->blend(at.slot, at.colour, at.weight);
+  };
   const auto addSample = [&](TileTarget* tile, const PlanePixel& pixel, const cv::Vec3b& rgb) {
     if (tile == nullptr) return;
-    std::array<std::uint8_t, 3> colour;
+    if (queued >= kAhead) blendPixel(queued - kAhead);
+    Pending& next = pending[queued % kAhead];
+    ++queued;
     for (int c = 0; c < 3; ++c) {
-      colour[static_cast<std::size_t>(c)] =
+      next.colour[static_cast<std::size_t>(c)] =
           cv::saturate_cast<std::uint8_t>(gain[c] * static_cast<float>(rgb[c]));
     }
-    tile->patch->samples.add(pixel.u, pixel.v, colour, pixel.weight * frame_weight, view);
+    next.samples = &tile->patch->samples;
+    next.slot = next.samples->locate(pixel.u, pixel.v, view);
+    next.weight = pixel.weight * frame_weight;
     ++tile->pixels;
     tile->distance_sum += pixel.distance;
   };
@@ -343,6 +362,7 @@ std::optional<Eigen::Vector3f> PatchMap::addColours(
     }
     targets.push_back(std::move(neighbour.target));  // settled with the regions' own below
   }
+  for (std::size_t i = queued - std::min(queued, kAhead); i < queued; ++i) blendPixel(i);
   const Eigen::Vector3d log_gain = gain.cast<double>().array().log();
   bool sampled = false;
   for (ColourTarget& target : targets) {

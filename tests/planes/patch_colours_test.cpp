@@ -32,6 +32,56 @@ TEST(ColourSamples, ACellBlendsItsSamplesByWeightAtTheirWeightedMeanPosition) {
   EXPECT_EQ(samples.bytes(), 32u * 32u * 12u);
 }
 
+// The per-pixel path locates cells ahead of blending them; each cell must end as add() one by
+// one leaves it, also where locating makes new tiles and layers (views kept apart) first.
+TEST(ColourSamples, LocatingAheadAndBlendingLaterLeavesTheCellsAsAddingOneByOne) {
+  std::mt19937 random(11);
+  std::uniform_real_distribution<float> position(-0.3F, 0.3F), weight(0.1F, 5.0F);
+  std::uniform_int_distribution<int> level(0, 255), view(0, 5);
+  for (const int views : {0, 2}) {
+    ColourSamples one_by_one(0.0035, views), ahead(0.0035, views);
+    struct Pending {
+      ColourSamples::Slot slot;
+      std::array<std::uint8_t, 3> rgb;
+      float weight;
+    };
+    std::vector<Pending> queue;
+    constexpr std::size_t kAhead = 7;
+    float row_u = 0.0F, row_v = 0.0F;
+    for (int i = 0; i < 20000; ++i) {
+      // Runs of neighbouring pixels about a cell apart, as an image row gives, with jumps
+      // between them; some land in a cell already blended.
+      if (i % 50 == 0) row_u = position(random), row_v = position(random);
+      const float u = row_u + 0.003F * static_cast<float>(i % 50);
+      const float v = row_v + 0.001F * position(random);
+      const std::array<std::uint8_t, 3> rgb{static_cast<std::uint8_t>(level(random)),
+                                            static_cast<std::uint8_t>(level(random)),
+                                            static_cast<std::uint8_t>(level(random))};
+      const float w = weight(random);
+      const int frame = views == 0 ? -1 : view(random);
+      one_by_one.add(u, v, rgb, w, frame);
+      queue.push_back({ahead.locate(u, v, frame), rgb, w});
+      if (queue.size() > kAhead) {
+        ahead.blend(queue.front().slot, queue.front().rgb, queue.front().weight);
+        queue.erase(queue.begin());
+      }
+    }
+    for (const Pending& left : queue) ahead.blend(left.slot, left.rgb, left.weight);
+    one_by_one.settle();
+    ahead.settle();
+    const std::vector<ColourSample> expected = one_by_one.all(), got = ahead.all();
+    ASSERT_EQ(got.size(), expected.size()) << views << " views";
+    EXPECT_GT(got.size(), 1000u);
+    for (std::size_t i = 0; i < got.size(); ++i) {
+      ASSERT_EQ(got[i].u, expected[i].u) << i;
+      ASSERT_EQ(got[i].v, expected[i].v) << i;
+      ASSERT_EQ(got[i].rgb, expected[i].rgb) << i;
+      ASSERT_EQ(got[i].score, expected[i].score) << i;
+      ASSERT_EQ(got[i].view, expected[i].view) << i;
+    }
+  }
+}
+
 TEST(Exposure, GainIsRecoveredDespiteOutliersAndClippedPixels) {
   std::mt19937 random(3);
   std::uniform_real_distribution<float> level(50.0F, 200.0F);

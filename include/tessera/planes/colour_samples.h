@@ -31,6 +31,23 @@ struct ColourSample {
 };
 
 class ColourSamples {
+ private:
+  // 12 bytes a cell: at 3.5 mm cells a fully covered square metre holds 0.98 MB.
+  struct Cell {
+    float weight = 0.0F;                 // sum of the blended samples' weights; 0: empty
+    std::array<std::uint16_t, 3> rgb{};  // running weighted mean, 8.8 fixed point
+    std::array<std::uint8_t, 2> at{};    // weighted mean position in the cell, 1/255 of a side
+  };
+  static constexpr int kTileCells = 32;  // tiles of 32 x 32 cells are allocated as touched
+  // One view's cells in a tile.
+  struct Layer {
+    std::int32_t view = -1;
+    float weight = 0.0F;      // summed weight of the view's pixels in the tile
+    std::size_t filled = 0;   // cells holding colour
+    std::vector<Cell> cells;  // kTileCells x kTileCells
+  };
+  using Tile = std::vector<Layer>;
+
  public:
   // views_per_tile: how many views each tile keeps (the heaviest by summed weight); 0 blends
   // all views into one.
@@ -45,6 +62,18 @@ class ColourSamples {
   // The same with the weight itself (positive), as the per-pixel path has it.
   void add(float u, float v, const std::array<std::uint8_t, 3>& rgb, float weight,
            std::int32_t view = -1);
+  // The two halves of add(): where a sample goes (its cell, the tile and layer made if new;
+  // the cell's memory is fetched meanwhile), then the blend. A caller with many samples finds
+  // the cells of the next ones before blending this one's, so that it does not wait on memory
+  // for each. A slot stays valid until settle(); each cell must see its blends in the order
+  // add() would have made them.
+  struct Slot {
+    Tile* tile = nullptr;
+    std::uint32_t layer = 0, cell = 0;
+    float at_u = 0.0F, at_v = 0.0F;  // the sample's position in its cell, in sides
+  };
+  Slot locate(float u, float v, std::int32_t view = -1);
+  void blend(const Slot& slot, const std::array<std::uint8_t, 3>& rgb, float weight);
   // Drops, in each tile that got more than views_per_tile views since the last call, the
   // layers of least summed weight. Call after adding a view (or a merge's samples): a view's
   // weight in a tile is known only once all its pixels are in.
@@ -64,21 +93,6 @@ class ColourSamples {
   static ColourSamples load(const std::filesystem::path& path);
 
  private:
-  // 12 bytes a cell: at 3.5 mm cells a fully covered square metre holds 0.98 MB.
-  struct Cell {
-    float weight = 0.0F;                 // sum of the blended samples' weights; 0: empty
-    std::array<std::uint16_t, 3> rgb{};  // running weighted mean, 8.8 fixed point
-    std::array<std::uint8_t, 2> at{};    // weighted mean position in the cell, 1/255 of a side
-  };
-  static constexpr int kTileCells = 32;  // tiles of 32 x 32 cells are allocated as touched
-  // One view's cells in a tile.
-  struct Layer {
-    std::int32_t view = -1;
-    float weight = 0.0F;      // summed weight of the view's pixels in the tile
-    std::size_t filled = 0;   // cells holding colour
-    std::vector<Cell> cells;  // kTileCells x kTileCells
-  };
-  using Tile = std::vector<Layer>;
   static std::int64_t keyOf(int tile_u, int tile_v);
   Tile& tileAt(int tile_u, int tile_v);
   Layer& layerOf(Tile& tile, std::int64_t key, std::int32_t view);
