@@ -1,7 +1,8 @@
 // Replay throughput: runs `tessera run`'s pipeline over a recording several times and prints
 // frames/s for the whole run and per stage (median over the repeats), plus peak memory; then
 // the plain Open3D loop (legacy RGB-D odometry + ScalableTSDFVolume) over the same frames on
-// the same machine, and the ratio of the two.
+// the same machine, and the ratio of the two. CPU time per frame (every thread) for both: for
+// tessera while streaming (report.json's cpu_ms_per_frame), and the end of the stream apart.
 //
 //   replay_bench [SOURCE] [--repeat N] [--threads N] [--max-frames N] [--poses track|gt]
 //                [--intrinsics fx,fy,cx,cy] [--depth-scale UNITS_PER_M] [--skip-open3d]
@@ -18,6 +19,7 @@
 
 #include "bench_frames.h"
 #include "open3d_loop.h"
+#include "tessera/core/cpu_time.h"
 #include "tessera/core/error.h"
 #include "tessera/core/intrinsics.h"
 #include "tessera/core/log.h"
@@ -64,7 +66,7 @@ int main(int argc, char** argv) {
   try {
     std::optional<tessera::core::Intrinsics> intrinsics;
     if (!intrinsics_spec.empty()) intrinsics = tessera::core::parseIntrinsicsSpec(intrinsics_spec);
-    std::vector<double> fps;
+    std::vector<double> fps, cpu_ms_per_frame, cpu_s_after;
     std::map<std::string, std::vector<double>> stage_median_ms, stage_alone_fps;
     std::map<std::string, std::size_t> stage_calls;  // in the last run
     std::size_t frames = 0, tsdf_bytes = 0;
@@ -79,6 +81,9 @@ int main(int argc, char** argv) {
       const auto summary =
           pipeline::runPipeline(*source, pipeline::loadRunConfig(std::nullopt), options);
       fps.push_back(summary.fps);
+      const std::size_t streamed = std::max<std::size_t>(summary.stream.frames, 1);
+      cpu_ms_per_frame.push_back(1e3 * summary.cpu.stream_s / static_cast<double>(streamed));
+      cpu_s_after.push_back(summary.cpu.end_of_stream_s + summary.cpu.finish_s);
       frames = summary.stream.frames;
       tsdf_bytes = summary.integration.tsdf_bytes;
       for (const auto& stage : summary.stages) {
@@ -95,6 +100,9 @@ int main(int argc, char** argv) {
     // reuse the freed heap. Both are printed.
     fmt::print("  whole pipeline   {:8.1f} frames/s (first run {:.1f})\n", median(fps),
                fps.front());
+    fmt::print("  CPU              {:8.1f} ms a frame while streaming, every thread; then {:.1f} s "
+               "to end the stream and finish\n",
+               median(cpu_ms_per_frame), median(cpu_s_after));
     // A call is a frame for the frame stages and a patch for the texture stages (match,
     // textures, commit), so their rates are calls, not frames.
     for (const auto& [name, values] : stage_median_ms) {
@@ -108,7 +116,10 @@ int main(int argc, char** argv) {
       // favours the loop: tessera's figures above include reading the recording).
       const auto loaded = tessera::bench::loadFrames(source_path, max_frames, /*need_truth=*/false,
                                                      intrinsics, depth_units_per_m);
+      const double cpu_before_s = tessera::core::processCpuSeconds();
       const auto loop = tessera::bench::plainOpen3dLoop(loaded, tessera::fusion::TsdfConfig{});
+      const double loop_cpu_ms = 1e3 * (tessera::core::processCpuSeconds() - cpu_before_s) /
+                                 static_cast<double>(std::max<std::size_t>(loaded.size(), 1));
       const double loop_fps = 1000.0 / loop.ms_per_frame;
       fmt::print("  plain Open3D loop {:7.1f} frames/s ({} frames in memory{}{})\n", loop_fps,
                  loaded.size(),
@@ -116,6 +127,8 @@ int main(int argc, char** argv) {
                  loop.odometry_failures > 0
                      ? fmt::format(", {} odometry failures", loop.odometry_failures)
                      : std::string());
+      fmt::print("  plain Open3D CPU {:8.1f} ms a frame, every thread (odometry and integration)\n",
+                 loop_cpu_ms);
       fmt::print("  tessera / Open3D {:8.1f}x\n", median(fps) / loop_fps);
     }
   } catch (const tessera::core::Error& e) {
