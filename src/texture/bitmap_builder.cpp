@@ -174,16 +174,22 @@ double texelSizeFor(const planes::PatchSnapshot& patch, const BitmapConfig& conf
 PatchBitmap buildBitmap(const planes::PatchSnapshot& patch, const BitmapConfig& config) {
   const auto start = std::chrono::steady_clock::now();
   PatchBitmap bitmap = emptyBitmap(patch, config);
-  std::vector<ColourSample> samples = patch.samples;
-  const std::vector<ViewShift> shifts = alignViews(samples, bitmap.grid, config.alignment);
-  for (const ViewShift& shift : shifts) {
-    const double mm = 1000.0 * bitmap.grid.texel_m * std::hypot(shift.dx, shift.dy);
-    bitmap.view_shift_mean_mm += mm / static_cast<double>(shifts.size());
-    bitmap.view_shift_max_mm = std::max(bitmap.view_shift_max_mm, mm);
-  }
-  bitmap.views_moved = static_cast<int>(shifts.size());
-  const bool views_apart = std::any_of(samples.begin(), samples.end(),
+  const bool views_apart = std::any_of(patch.samples.begin(), patch.samples.end(),
                                        [](const ColourSample& s) { return s.view >= 0; });
+  // Views kept apart are aligned to each other, which moves their samples: a copy. Blended
+  // samples (the default) have no views to align and are read where they are.
+  std::vector<ColourSample> aligned;
+  if (views_apart) {
+    aligned = patch.samples;
+    const std::vector<ViewShift> shifts = alignViews(aligned, bitmap.grid, config.alignment);
+    for (const ViewShift& shift : shifts) {
+      const double mm = 1000.0 * bitmap.grid.texel_m * std::hypot(shift.dx, shift.dy);
+      bitmap.view_shift_mean_mm += mm / static_cast<double>(shifts.size());
+      bitmap.view_shift_max_mm = std::max(bitmap.view_shift_max_mm, mm);
+    }
+    bitmap.views_moved = static_cast<int>(shifts.size());
+  }
+  const std::vector<ColourSample>& samples = views_apart ? aligned : patch.samples;
   if (config.views.enabled && views_apart) {
     const ViewComposite composite = composeByViews(samples, bitmap.grid, config.views,
                                                    config.radius_texels, config.sigma_texels);
