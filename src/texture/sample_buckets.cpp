@@ -65,6 +65,7 @@ int SampleBuckets::nearest(const Eigen::Vector2d& uv, int max_count, std::vector
                            static_cast<long>(std::floor((uv.x() + radius - origin_.x()) / side_)));
   const long y1 =
       std::min(rows_ - 1, static_cast<long>(std::floor((uv.y() + radius - origin_.y()) / side_)));
+  if (x0 > x1 || y0 > y1) return 0;  // uv lies farther than the radius from every bucket
   // Buckets x0..x1 of a row are one run of kept_. Every candidate is written and only those
   // within the radius advance the count: no branch to mispredict on half of them.
   std::size_t candidates = 0;

@@ -65,8 +65,9 @@ class ColourSamples {
   // The two halves of add(): where a sample goes (its cell, the tile and layer made if new;
   // the cell's memory is fetched meanwhile), then the blend. A caller with many samples finds
   // the cells of the next ones before blending this one's, so that it does not wait on memory
-  // for each. A slot stays valid until settle() or until the samples are moved; each cell
-  // must see its blends in the order add() would have made them.
+  // for each. A slot belongs to the object that located it and stays valid until settle()
+  // or until that object is moved or assigned; each cell must see its blends in the order
+  // add() would have made them.
   struct Slot {
     Tile* tile = nullptr;
     std::uint32_t layer = 0, cell = 0;
