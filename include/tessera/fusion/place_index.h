@@ -1,27 +1,27 @@
 #pragma once
-// Place recognition over keyframes: keyframes' ORB descriptors go into FLANN indexes
-// (locality-sensitive hashing under the Hamming distance), and a query keyframe's descriptors
-// vote for the keyframes whose descriptors lie near them.
+// Place recognition over keyframes: keyframes' ORB descriptors are hashed into a few tables
+// (locality-sensitive hashing under the Hamming distance: each table's key is a fixed random
+// choice of the descriptor's bits), and a query keyframe's descriptors vote for the keyframes
+// whose descriptors share a key with them and lie near.
 //
-// FLANN's LSH index cannot grow, so the keyframes are kept in batches of 1, 2, 4, ... units
-// of `batch_keyframes`, each with its own index; two batches of the same size are merged into
-// one (the logarithmic method). A lookup searches O(log n) indexes and each keyframe is
-// re-indexed O(log n) times. The newest keyframes, not yet a unit, are searched linearly; they
-// are usually too recent to be revisit candidates and then skipped.
+// Each table is a sorted array of (key, row) pairs, 8 bytes per descriptor. FLANN's LSH index,
+// used before, kept a hash map node and a vector per key: about 340 bytes per descriptor, 240
+// MB for the loop lap's 700,000 descriptors. A sorted array cannot grow in place either, so the
+// keyframes are kept in batches of 1, 2, 4, ... units of `batch_keyframes`; two batches of the
+// same size are merged into one (the logarithmic method). A lookup searches O(log n) batches
+// and each descriptor is merged O(log n) times. The newest keyframes, not yet a unit, are
+// searched linearly; they are usually too recent to be revisit candidates and then skipped.
 //
 // Thread-safety: none; each user owns one (the tracker, to relocalise a lost frame; the loop
 // closer's worker, to find revisits).
+#include <array>
 #include <cstddef>
-#include <memory>
+#include <cstdint>
 #include <vector>
 
 #include <opencv2/core.hpp>
 
 #include "tessera/fusion/feature_pose.h"
-
-namespace cv::flann {
-class Index;
-}
 
 namespace tessera::fusion {
 
@@ -59,16 +59,42 @@ class PlaceIndex {
   std::size_t keyframes() const { return keyframe_count_; }
   std::size_t descriptors() const { return owner_.size(); }
   std::size_t indexes() const { return batches_.size(); }
+  // Heap bytes held: the descriptors, their owners and the hash tables.
+  std::size_t bytes() const;
+
+  static constexpr int kTables = 4;    // hash tables
+  static constexpr int kKeyBits = 20;  // bits of a descriptor in a table's key
 
  private:
+  struct Entry {
+    std::uint32_t key = 0;
+    std::uint32_t row = 0;  // descriptor row in all_
+    friend bool operator<(const Entry& a, const Entry& b) {
+      return a.key != b.key ? a.key < b.key : a.row < b.row;
+    }
+  };
+  // A table's entries sorted by key, then row, with where each value of the key's top
+  // kDirectoryBits begins: a lookup searches a few dozen entries, not the whole array.
+  struct Table {
+    std::vector<Entry> entries;
+    std::vector<std::uint32_t> starts;  // 2^kDirectoryBits + 1 offsets into entries
+  };
   struct Batch {
     std::size_t begin = 0, end = 0;  // descriptor rows
     std::size_t units = 1;
-    cv::Mat rows;  // the index's own copy of its rows
-    std::unique_ptr<cv::flann::Index> index;
+    std::array<Table, kTables> tables;
   };
-  Batch makeBatch(std::size_t begin, std::size_t end, std::size_t units) const;
+  static constexpr int kDirectoryBits = 12;
+  static void index(Table& table);
+  std::uint32_t keyOf(int table, const unsigned char* descriptor) const;
+  Batch makeBatch(std::size_t begin, std::size_t end) const;
+  static Batch merge(const Batch& older, const Batch& newer);
+  // The `k` rows of `batch` nearest to `descriptor` among those sharing a key with it, nearest
+  // first (ties by row), with their distances.
+  void nearestInBatch(const Batch& batch, const unsigned char* descriptor, int k,
+                      std::vector<std::pair<int, std::uint32_t>>& found) const;
 
+  std::array<std::array<std::uint8_t, kKeyBits>, kTables> key_bits_{};  // bit of each key bit
   std::size_t batch_keyframes_;
   std::size_t keyframe_count_ = 0;
   std::size_t tail_keyframes_ = 0;  // keyframes added since the last batch

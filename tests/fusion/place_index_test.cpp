@@ -1,0 +1,86 @@
+#include "tessera/fusion/place_index.h"
+
+#include <bitset>
+#include <random>
+
+#include <gtest/gtest.h>
+
+namespace tessera::fusion {
+namespace {
+
+constexpr int kPerKeyframe = 1000;
+
+cv::Mat randomDescriptors(int rows, std::mt19937& random) {
+  cv::Mat out(rows, 32, CV_8U);
+  std::uniform_int_distribution<int> byte(0, 255);
+  for (int r = 0; r < rows; ++r) {
+    for (int c = 0; c < 32; ++c) out.at<uchar>(r, c) = static_cast<uchar>(byte(random));
+  }
+  return out;
+}
+
+// `descriptors` with `flips` distinct random bits of each row flipped.
+cv::Mat flipped(const cv::Mat& descriptors, int flips, std::mt19937& random) {
+  cv::Mat out = descriptors.clone();
+  std::uniform_int_distribution<int> bit(0, 255);
+  for (int r = 0; r < out.rows; ++r) {
+    std::bitset<256> done;
+    while (static_cast<int>(done.count()) < flips) {
+      const int b = bit(random);
+      if (done[static_cast<std::size_t>(b)]) continue;
+      done.set(static_cast<std::size_t>(b));
+      out.at<uchar>(r, b / 8) ^= static_cast<uchar>(1u << (b % 8));
+    }
+  }
+  return out;
+}
+
+TEST(PlaceIndex, FindsTheKeyframeWhoseDescriptorsAQueryRepeatsWithAFewBitsChanged) {
+  std::mt19937 random(7);
+  PlaceIndex index(4);
+  std::vector<cv::Mat> keyframes;
+  for (int id = 0; id < 37; ++id) {
+    keyframes.push_back(randomDescriptors(kPerKeyframe, random));
+    index.add(id, keyframes.back());
+  }
+  // 37 keyframes in units of 4: nine units, merged into batches of 32 and 4 keyframes, then a
+  // tail of 1.
+  EXPECT_EQ(index.indexes(), 2u);
+  EXPECT_EQ(index.descriptors(), 37u * kPerKeyframe);
+
+  PlaceQuery query;
+  query.max_distance = 40;
+  query.min_votes = 20;
+  for (const int id : {0, 20, 31, 33, 36}) {  // in each batch, and in the tail
+    // 300 of the keyframe's descriptors, 3 bits of each changed (image noise).
+    const cv::Mat probe = flipped(keyframes[static_cast<std::size_t>(id)].rowRange(0, 300), 3, random);
+    const std::vector<PlaceCandidate> found = index.query(probe, query);
+    ASSERT_FALSE(found.empty()) << "keyframe " << id;
+    EXPECT_EQ(found.front().keyframe, id);
+    // A descriptor is missed only when each table's 20 key bits hold a changed one:
+    // (1 - (253/256)^20)^4, about 0.2 %.
+    EXPECT_GE(found.front().votes, 290) << "keyframe " << id;
+    // Random descriptors lie about 128 bits apart: no other keyframe gets votes.
+    EXPECT_EQ(found.size(), 1u) << "keyframe " << id;
+  }
+  // A place never seen finds nothing.
+  EXPECT_TRUE(index.query(randomDescriptors(300, random), query).empty());
+  // Keyframes newer than newest_allowed are no candidates.
+  query.newest_allowed = 30;
+  EXPECT_TRUE(index.query(flipped(keyframes[35].rowRange(0, 300), 3, random), query).empty());
+}
+
+TEST(PlaceIndex, HoldsAFewTensOfBytesPerDescriptor) {
+  std::mt19937 random(11);
+  PlaceIndex index(8);
+  for (int id = 0; id < 64; ++id) index.add(id, randomDescriptors(kPerKeyframe, random));
+  // The descriptor (32 bytes), its owner (4) and a (key, row) pair per table (8 each): 68
+  // bytes, and some slack in the arrays.
+  const double per_descriptor =
+      static_cast<double>(index.bytes()) / static_cast<double>(index.descriptors());
+  EXPECT_GE(per_descriptor, 68.0);
+  EXPECT_LE(per_descriptor, 100.0);
+}
+
+}  // namespace
+}  // namespace tessera::fusion
