@@ -39,13 +39,26 @@ class PatchJobs {
  public:
   std::vector<JobMessage> finalized(std::vector<planes::PatchSnapshot>& patches,
                                     std::uint64_t frame_index) {
+    openBatch(patches.size(), frame_index);
+    return inOpenBatch(patches);
+  }
+  // A batch of `size` patches finalized now by frame `frame_index`, whose copies may come in
+  // parts (inOpenBatch).
+  void openBatch(std::size_t size, std::uint64_t frame_index) {
+    batch_ = {size > 0 ? next_batch_++ : next_batch_, size, frame_index,
+              std::chrono::steady_clock::now()};
+  }
+  std::vector<JobMessage> inOpenBatch(std::vector<planes::PatchSnapshot>& patches) {
     std::vector<JobMessage> jobs;
-    const auto now = std::chrono::steady_clock::now();
     for (planes::PatchSnapshot& patch : patches) {
-      jobs.push_back(std::make_shared<const PatchJob>(PatchJob{
-          next_sequence_++, next_batch_, patches.size(), frame_index, std::move(patch), now, {}}));
+      jobs.push_back(std::make_shared<const PatchJob>(PatchJob{next_sequence_++,
+                                                               batch_.index,
+                                                               batch_.size,
+                                                               batch_.frame_index,
+                                                               std::move(patch),
+                                                               batch_.finalized_at,
+                                                               {}}));
     }
-    if (!jobs.empty()) ++next_batch_;
     patches.clear();
     return jobs;
   }
@@ -64,7 +77,13 @@ class PatchJobs {
   }
 
  private:
+  struct OpenBatch {
+    std::size_t index = 0, size = 0;
+    std::uint64_t frame_index = 0;
+    std::chrono::steady_clock::time_point finalized_at;
+  };
   std::size_t next_sequence_ = 0, next_batch_ = 0;
+  OpenBatch batch_;
 };
 
 // Holds the frame path back while too many patch jobs wait to be described and committed: a
@@ -276,13 +295,27 @@ std::size_t runGraph(FramePath& frames, PatchPath& patches, RunReport& report,
     source_node.activate();
     graph.wait_for_all();
 
-    // End of stream: the patches still live are finalized and textured like the others.
-    std::vector<planes::PatchSnapshot> finalized;
-    const std::vector<planes::PatchEvent> events = frames.finishStream(finalized);
+    // End of stream: the patches still live are finalized and textured like the others. They
+    // are copied for texturing as the backlog allows, not all at once: each copy holds a
+    // patch's colour samples, and the end finalizes many patches (a long walk's process peak
+    // was these copies).
+    const std::vector<planes::PatchEvent> events = frames.finishStream();
     report.patchEvents(events);
     queue(jobs.retired(events), describe_node);
-    queue(jobs.finalized(finalized, frames_reported), describe_node);
-    graph.wait_for_all();
+    const std::vector<int> ids = planes::finalizedIds(events);
+    jobs.openBatch(ids.size(), frames_reported);
+    const auto part = static_cast<std::size_t>(std::max(1, options.max_patches_waiting));
+    for (std::size_t first = 0; first < ids.size(); first += part) {
+      const std::vector<int> some(
+          ids.begin() + static_cast<std::ptrdiff_t>(first),
+          ids.begin() + static_cast<std::ptrdiff_t>(std::min(ids.size(), first + part)));
+      std::vector<planes::PatchSnapshot> finalized = frames.snapshots(some);
+      queue(jobs.inOpenBatch(finalized), describe_node);
+      // This part is textured and committed before the next is copied (a describing thread
+      // may idle at its end).
+      graph.wait_for_all();
+    }
+    graph.wait_for_all();  // the retirements, when nothing was finalized
   });
   describers.rethrowFirst();
   committer.rethrowFirst();

@@ -30,13 +30,16 @@ FusedFrame RunStages::findPlanes(FusedFrame fused) {
   return out;
 }
 
-std::vector<planes::PatchEvent> RunStages::finishStream(
-    std::vector<planes::PatchSnapshot>& finalized) {
-  if (loop_closer_ == nullptr) return planes_.finishStream(finalized);
+std::vector<planes::PatchEvent> RunStages::finishStream() {
+  if (loop_closer_ == nullptr) return planes_.finishStream();
   const auto start = std::chrono::steady_clock::now();
   loop_closer_->finish();
   loop_wait_s_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  return planes_.finishStream(finalized, loop_closer_->correction());
+  return planes_.finishStream(loop_closer_->correction());
+}
+
+std::vector<planes::PatchSnapshot> RunStages::snapshots(const std::vector<int>& ids) const {
+  return planes_.snapshots(ids);
 }
 
 void RunStages::frameDone(const FusedFrame& fused) {

@@ -367,7 +367,8 @@ FusedFrame PlaneStage::process(FusedFrame fused) {
   }
   if (fused.frame.source_interrupted) {
     // What was seen before the interruption is kept even if the device never comes back.
-    fused.patch_events = finish(fused.finalized_patches);
+    fused.patch_events = finish();
+    fused.finalized_patches = snapshotsOf(fused.patch_events);
     fused.figures.patches_live = map_.liveCount();
     fused.figures.patches_finalized = map_.finalizedCount();
     return fused;
@@ -466,31 +467,31 @@ core::Isometry PlaneStage::loopMotion(std::int64_t keyframe_ns) const {
 }
 
 std::vector<planes::PatchEvent> PlaneStage::finishStream(
-    std::vector<planes::PatchSnapshot>& finalized,
     std::shared_ptr<const loop::MapCorrection> last_correction) {
   followLoopClosure(std::move(last_correction));
-  return finish(finalized);
+  return finish();
 }
 
-std::vector<planes::PatchEvent> PlaneStage::finish(std::vector<planes::PatchSnapshot>& finalized) {
+std::vector<planes::PatchEvent> PlaneStage::finish() {
   std::vector<planes::PatchEvent> events = map_.finalizeAll();
   count(events);
-  finalized = snapshotsOf(events);
   return events;
 }
 
 std::vector<planes::PatchSnapshot> PlaneStage::snapshotsOf(
     const std::vector<planes::PatchEvent>& events) const {
-  std::vector<planes::PatchSnapshot> snapshots;
+  return snapshots(planes::finalizedIds(events));
+}
+
+std::vector<planes::PatchSnapshot> PlaneStage::snapshots(const std::vector<int>& ids) const {
+  std::vector<planes::PatchSnapshot> out;
   // cv::Mat's move may throw, so a vector of snapshots copies them, samples and all, as it
   // grows: reserve.
-  snapshots.reserve(events.size());
-  for (const planes::PatchEvent& event : events) {
-    if (event.kind != planes::PatchEvent::Kind::kFinalized) continue;
-    if (const planes::Patch* patch = map_.find(event.id))
-      snapshots.push_back(map_.snapshot(*patch));
+  out.reserve(ids.size());
+  for (const int id : ids) {
+    if (const planes::Patch* patch = map_.find(id)) out.push_back(map_.snapshot(*patch));
   }
-  return snapshots;
+  return out;
 }
 
 }  // namespace tessera::pipeline

@@ -248,6 +248,14 @@ std::vector<int> PatchMap::add(const std::vector<PlaneObservation>& observations
   return ids;
 }
 
+std::vector<int> finalizedIds(const std::vector<PatchEvent>& events) {
+  std::vector<int> ids;
+  for (const PatchEvent& event : events) {
+    if (event.kind == PatchEvent::Kind::kFinalized) ids.push_back(event.id);
+  }
+  return ids;
+}
+
 PatchSnapshot PatchMap::snapshot(const Patch& patch) const {
   PatchSnapshot snapshot;
   snapshot.id = patch.id;

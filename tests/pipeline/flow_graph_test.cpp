@@ -104,17 +104,24 @@ class FakeFrames : public FramePath {
     }
     return fused;
   }
-  std::vector<planes::PatchEvent> finishStream(
-      std::vector<planes::PatchSnapshot>& finalized) override {
+  std::vector<planes::PatchEvent> finishStream() override {
     std::vector<planes::PatchEvent> events{{planes::PatchEvent::Kind::kRetired, retired_, 1}};
     finalization_order.push_back(-retired_++);
-    for (int i = 0; i < 3; ++i) {
-      finalized.push_back(patch(next_id_));
+    for (int i = 0; i < kFinalizedAtTheEnd; ++i) {
+      events.push_back({planes::PatchEvent::Kind::kFinalized, next_id_, 1});
       finalization_order.push_back(next_id_);
       batch_of_patch[next_id_++] = kStreamFrames;  // the end's batch: after the last frame
     }
     return events;
   }
+  std::vector<planes::PatchSnapshot> snapshots(const std::vector<int>& ids) const override {
+    end_parts.push_back(ids.size());
+    std::vector<planes::PatchSnapshot> out;
+    for (const int id : ids) out.push_back(patch(id));
+    return out;
+  }
+  static constexpr int kFinalizedAtTheEnd = 10;
+  mutable std::vector<std::size_t> end_parts;  // how many patches each snapshots() call copied
 
   std::atomic<int> in_flight{0}, max_in_flight{0}, out_of_order{0}, track_nice{-100};
   std::atomic<bool> stream_read{false};  // the source said the stream ended
@@ -253,7 +260,7 @@ TEST_P(FlowGraphTest, KeepsOrderBatchesAndBackPressureAndFlushesAtTheEnd) {
     if (id > 0) finalized.push_back(id);
   }
   EXPECT_EQ(report.reported_commits, finalized);
-  EXPECT_EQ(report.end_events, 1u);
+  EXPECT_EQ(report.end_events, 1u + FakeFrames::kFinalizedAtTheEnd);
 
   // Each batch: the patches one frame finalized, all reported, named with that frame.
   std::size_t patches_in_batches = 0;
@@ -265,7 +272,10 @@ TEST_P(FlowGraphTest, KeepsOrderBatchesAndBackPressureAndFlushesAtTheEnd) {
   EXPECT_EQ(patches_in_batches, finalized.size());
   ASSERT_FALSE(report.batches.empty());
   EXPECT_EQ(report.batches.rbegin()->second.frame_index, static_cast<std::uint64_t>(kStreamFrames));
-  EXPECT_EQ(report.batches.rbegin()->second.size, 3u);
+  EXPECT_EQ(report.batches.rbegin()->second.size,
+            static_cast<std::size_t>(FakeFrames::kFinalizedAtTheEnd));
+  // The end's patches are copied (colour samples and all) as the backlog's bound (4) allows.
+  EXPECT_EQ(frames.end_parts, (std::vector<std::size_t>{4, 4, 2}));
 
   // Texturing runs at a lower priority than the frame path.
   EXPECT_EQ(frames.track_nice, nice);

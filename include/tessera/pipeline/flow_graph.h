@@ -39,9 +39,11 @@ class FramePath {
   // Also names the patches the frame finalized (finalized_patches) and what else changed
   // (patch_events).
   virtual FusedFrame findPlanes(FusedFrame fused) = 0;
-  // End of the stream: finalizes what is left (into `finalized`) and says what changed.
-  virtual std::vector<planes::PatchEvent> finishStream(
-      std::vector<planes::PatchSnapshot>& finalized) = 0;
+  // End of the stream: finalizes what is left and says what changed.
+  virtual std::vector<planes::PatchEvent> finishStream() = 0;
+  // After finishStream: a copy of each patch `ids` names, for texturing. The graph takes them a
+  // few at a time, since each copies a patch's colour samples.
+  virtual std::vector<planes::PatchSnapshot> snapshots(const std::vector<int>& ids) const = 0;
 };
 
 // The patch path: each finalized patch described (many at once), then committed one at a time

@@ -212,13 +212,14 @@ class PlaneStage {
              const planes::PlaneAlignmentConfig& alignment, bool follows_loops = false);
 
   FusedFrame process(FusedFrame fused);
-  // Finalizes every remaining patch above the area bound; `finalized` gets a copy of each for
-  // texturing (an interrupted source: what was seen so far is kept).
-  std::vector<planes::PatchEvent> finish(std::vector<planes::PatchSnapshot>& finalized);
+  // Finalizes every remaining patch above the area bound (an interrupted source: what was seen
+  // so far is kept); snapshots() copies them for texturing.
+  std::vector<planes::PatchEvent> finish();
   // End of stream: follows loop closure's last correction (when there is one), then finish().
   std::vector<planes::PatchEvent> finishStream(
-      std::vector<planes::PatchSnapshot>& finalized,
       std::shared_ptr<const loop::MapCorrection> last_correction = nullptr);
+  // A copy of each patch of `ids` still in the map, for texturing.
+  std::vector<planes::PatchSnapshot> snapshots(const std::vector<int>& ids) const;
 
   const planes::PatchMap& map() const { return map_; }
   // The loop correction the map follows now (none before the first).

@@ -217,6 +217,9 @@ struct PatchEvent {
   const char* reason = "";
 };
 
+// The ids of the patches `events` finalizes, in their order.
+std::vector<int> finalizedIds(const std::vector<PatchEvent>& events);
+
 class PatchMap {
  public:
   explicit PatchMap(const PatchMapConfig& config) : config_(config) {}

@@ -42,8 +42,8 @@ class RunStages : public FramePath, public PatchPath, public RunReport {
   // Also the map's checkpoint, while the plane stage holds still.
   FusedFrame findPlanes(FusedFrame fused) override;
   // Waits for loop closure's last optimisation, so that the map follows it, then finishes.
-  std::vector<planes::PatchEvent> finishStream(
-      std::vector<planes::PatchSnapshot>& finalized) override;
+  std::vector<planes::PatchEvent> finishStream() override;
+  std::vector<planes::PatchSnapshot> snapshots(const std::vector<int>& ids) const override;
 
   DescribedPatch describe(const PatchJob& job) const override { return describe_.process(job); }
   std::optional<CommitMessage> commit(DescribedPatch described) override;
