@@ -5,7 +5,7 @@
 // whose descriptors share a key with them and lie near.
 //
 // Each table is a sorted array of (key, row) pairs, 8 bytes per descriptor. FLANN's LSH index,
-// used before, kept a hash map node and a vector per key: about 340 bytes per descriptor, 240
+// used before, kept a hash map node and a vector per key: about 300 bytes per descriptor, 240
 // MB for the loop lap's 700,000 descriptors. A sorted array cannot grow in place either, so the
 // keyframes are kept in batches of 1, 2, 4, ... units of `batch_keyframes`; two batches of the
 // same size are merged into one (the logarithmic method). A lookup searches O(log n) batches
