@@ -104,23 +104,32 @@ Rendered sampleTexture(const cv::Mat& texture, const cv::Mat& texture_mask, cons
     const cv::Rect window = tiled ? cv::Rect(0, 0, texture.cols, texture.rows)
                                   : sampledWindow(map_x, map_y, texture.size());
     if (window.empty()) return out;  // every sample falls outside the texture
-    cv::Mat window_x = map_x, window_y = map_y;
-    if (window.x != 0 || window.y != 0) {
-      cv::subtract(map_x, static_cast<double>(window.x), window_x);
-      cv::subtract(map_y, static_cast<double>(window.y), window_y);
-    }
-    cv::Mat colour, weight, weight3, sampled_colour, sampled_weight;
+    cv::Mat colour, weight, weight3;
     texture(window).convertTo(colour, CV_32FC3);
     cv::threshold(texture_mask(window), weight, 0, 1, cv::THRESH_BINARY);
     weight.convertTo(weight, CV_32F);
     cv::merge(std::vector<cv::Mat>{weight, weight, weight}, weight3);
+    const cv::Mat weighted_colour = colour.mul(weight3);
     const int masked_border = tiled ? cv::BORDER_WRAP : cv::BORDER_CONSTANT;
-    cv::remap(colour.mul(weight3), sampled_colour, window_x, window_y, cv::INTER_LINEAR,
-              masked_border);
-    cv::remap(weight3, sampled_weight, window_x, window_y, cv::INTER_LINEAR, masked_border);
-    cv::Mat blended;
-    cv::divide(sampled_colour, cv::max(sampled_weight, 1e-6), blended);
-    blended.convertTo(out.rgb, CV_8UC3);
+    // In strips of rows: each output texel depends on its own map entry only, so the values
+    // are the same, and the float buffers stay small (whole, they held about 60 bytes a
+    // texel at once: a floor tile's render, tens of MB, on each describing thread).
+    constexpr int kStripRows = 64;
+    cv::Mat shifted_x, shifted_y, sampled_colour, sampled_weight, blended;
+    for (int first = 0; first < map_x.rows; first += kStripRows) {
+      const cv::Range rows(first, std::min(map_x.rows, first + kStripRows));
+      cv::Mat strip_x = map_x.rowRange(rows), strip_y = map_y.rowRange(rows);
+      if (window.x != 0 || window.y != 0) {
+        cv::subtract(strip_x, static_cast<double>(window.x), shifted_x);
+        cv::subtract(strip_y, static_cast<double>(window.y), shifted_y);
+        strip_x = shifted_x;
+        strip_y = shifted_y;
+      }
+      cv::remap(weighted_colour, sampled_colour, strip_x, strip_y, cv::INTER_LINEAR, masked_border);
+      cv::remap(weight3, sampled_weight, strip_x, strip_y, cv::INTER_LINEAR, masked_border);
+      cv::divide(sampled_colour, cv::max(sampled_weight, 1e-6), blended);
+      blended.convertTo(out.rgb.rowRange(rows), CV_8UC3);
+    }
   }
   out.rgb.setTo(cv::Scalar::all(0), out.covered == 0);
   return out;

@@ -160,12 +160,19 @@ TEST(Fidelity, AMaskedRenderOfASmallPlacementIsTheBilinearMeanOverValidTexels) {
     }
     return sum / weight;
   };
-  for (const core::Similarity2& placement :
-       {core::Similarity2{1.0, 0.0, 120.3, 80.6}, core::Similarity2{0.0, 1.0, 190.0, 130.25}}) {
-    const Rendered rendered = renderThrough(texture, mask, placement, 30, 20, false);
+  struct Placed {
+    core::Similarity2 placement;
+    int width, height;
+  };
+  // The last is taller than the strips of rows a render works in (64), and starts above the
+  // texture.
+  for (const auto& [placement, width, height] :
+       {Placed{{1.0, 0.0, 120.3, 80.6}, 30, 20}, Placed{{0.0, 1.0, 190.0, 130.25}, 30, 20},
+        Placed{{1.0, 0.0, 20.5, -10.25}, 40, 150}}) {
+    const Rendered rendered = renderThrough(texture, mask, placement, width, height, false);
     int checked = 0;
-    for (int r = 0; r < 20; ++r) {
-      for (int c = 0; c < 30; ++c) {
+    for (int r = 0; r < height; ++r) {
+      for (int c = 0; c < width; ++c) {
         if (rendered.covered.at<std::uint8_t>(r, c) == 0) continue;
         const Eigen::Vector2d p = placement.apply({c, r});
         const cv::Vec3d want = expected(p.x(), p.y());
