@@ -24,6 +24,7 @@ void PairingInbox::pushColour(CapturedImage frame) {
       std::upper_bound(colour.begin(), colour.end(), frame.stamp,
                        [](std::int64_t stamp, const CapturedImage& c) { return stamp < c.stamp; });
   colour.insert(at, std::move(frame));
+  colour_started = true;
   while (colour.size() > colour_capacity) colour.pop_front();
   changed.notify_all();
 }
@@ -38,6 +39,11 @@ LiveStats PairingInbox::withCounts(LiveStats stats) {
 void PairingInbox::clearFrames() {
   depth.clear();
   colour.clear();
+  colour_started = false;
+}
+
+std::chrono::microseconds PairingInbox::colourWait(std::chrono::microseconds usual) const {
+  return colour_started ? usual : std::max(usual, colour_start_wait);
 }
 
 std::optional<CapturedImage> PairingInbox::takeColourNear(std::unique_lock<std::mutex>& lock,

@@ -1,7 +1,7 @@
 // The depth/colour inbox the live sources share: a busy reader loses the oldest depth frames
 // (counted), each depth frame takes the colour frame nearest in time within the tolerance,
 // older colour frames go with it, colour frames are kept in stamp order, and a colour frame
-// still on its way is waited for.
+// still on its way is waited for, longer while the colour stream has not started.
 #include "tessera/core/frame_pairing.h"
 
 #include <thread>
@@ -73,6 +73,18 @@ TEST(PairingInbox, WaitsForAColourFrameStillOnItsWay) {
   device.join();
   ASSERT_TRUE(colour);
   EXPECT_EQ(colour->stamp, 33);
+}
+
+// A colour stream starts after depth: the first depth frame waits longer for its colour than
+// the ones after it, and a new connection starts over.
+TEST(PairingInbox, WaitsLongerForTheColourStreamToStart) {
+  PairingInbox inbox;
+  const auto usual = std::chrono::microseconds(66'000);
+  EXPECT_EQ(inbox.colourWait(usual), inbox.colour_start_wait);
+  inbox.pushColour(at(0));
+  EXPECT_EQ(inbox.colourWait(usual), usual);
+  inbox.clearFrames();
+  EXPECT_EQ(inbox.colourWait(usual), inbox.colour_start_wait);
 }
 
 }  // namespace

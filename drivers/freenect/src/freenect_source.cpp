@@ -220,7 +220,7 @@ core::ReadResult FreenectSource::nextFrame() {
   // The colour frame nearest in time, waited for a little when it has not come yet.
   std::optional<core::CapturedImage> colour = inbox_.takeColourNear(
       lock, depth.stamp, kPairingToleranceTicks,
-      std::chrono::duration_cast<std::chrono::microseconds>(2 * kFramePeriod));
+      inbox_.colourWait(std::chrono::duration_cast<std::chrono::microseconds>(2 * kFramePeriod)));
   if (!colour) {
     result.status = core::ReadStatus::kBadFrame;
     result.problem =

@@ -314,7 +314,7 @@ core::ReadResult OpenNi2Source::State::nextFrame() {
   inbox.depth.pop_front();
   // The colour frame nearest in time, waited for a little when it has not come yet.
   std::optional<core::CapturedImage> colour = inbox.takeColourNear(
-      lock, depth.stamp, tolerance_us, std::chrono::microseconds(2 * period_us));
+      lock, depth.stamp, tolerance_us, inbox.colourWait(std::chrono::microseconds(2 * period_us)));
   if (!colour) {
     result.status = core::ReadStatus::kBadFrame;
     result.problem = fmt::format("depth frame {} (t = {} us): no colour frame within {} us",

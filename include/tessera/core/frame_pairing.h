@@ -35,6 +35,10 @@ struct PairingInbox {
   std::size_t delivered = 0;        // depth frames the device sent
   std::size_t dropped = 0;          // ... that the reader never got
   bool lost = false;                // the device went away
+  bool colour_started = false;      // a colour frame has come since the connection opened
+  // A colour stream starts later than depth (a Kinect's by a few hundred ms, and a loaded
+  // machine's threads later still): until its first frame has come, pairing waits this long.
+  std::chrono::microseconds colour_start_wait = std::chrono::seconds(1);
 
   // Under `mutex`, and notifying the reader: a depth frame, after `missed` ones the device
   // sent that never arrived; the oldest held beyond capacity are dropped.
@@ -43,6 +47,9 @@ struct PairingInbox {
   void pushColour(CapturedImage frame);
   // Empties the queues for a new connection (the counts stay).
   void clearFrames();
+  // How long a depth frame waits for its colour frame: `usual`, or colour_start_wait while the
+  // colour stream has not started.
+  std::chrono::microseconds colourWait(std::chrono::microseconds usual) const;
   // `stats` with the delivered and dropped counts filled in (takes the mutex).
   LiveStats withCounts(LiveStats stats);
 
