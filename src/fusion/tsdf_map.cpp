@@ -103,6 +103,13 @@ TsdfMap::TsdfMap(const TsdfConfig& config)
 
 TsdfMap::~TsdfMap() = default;
 
+void TsdfMap::clear() {
+  volume_ = std::make_unique<Volume>(config_.voxel_size_m, config_.truncation_m,
+                                     config_.block_resolution);
+  released_pieces_.clear();
+  released_bytes_ = 0;
+}
+
 void TsdfMap::integrate(const core::Frame& frame, const core::Isometry& T_W_C) {
   const core::Intrinsics& k = frame.intrinsics;
   if (!k.valid() || frame.depth_mm.type() != CV_16UC1 || frame.depth_mm.cols != k.width ||
@@ -138,16 +145,6 @@ void append(const std::vector<Eigen::Vector3d>& vertices,
   }
 }
 
-void append(const SurfaceMesh& mesh, SurfaceMesh& into) {
-  append(mesh.vertices, mesh.colors, mesh.triangles, into);
-}
-
-// What a kept piece costs: positions and colours, and its triangles.
-std::size_t bytesOf(const SurfaceMesh& piece) {
-  return piece.vertices.size() * 2 * sizeof(Eigen::Vector3d) +
-         piece.triangles.size() * sizeof(Eigen::Vector3i);
-}
-
 using BlockKey = std::array<int, 3>;
 
 BlockKey keyOf(const Eigen::Vector3i& index) { return {index.x(), index.y(), index.z()}; }
@@ -180,12 +177,53 @@ std::map<BlockKey, SurfaceMesh> piecesByBlock(const o3d::geometry::TriangleMesh&
 
 }  // namespace
 
+void TsdfMap::keep(const SurfaceMesh& mesh, SurfacePiece& into) {
+  // Built to size: push_back's growth would leave up to half of each vector unused.
+  SurfacePiece piece;
+  piece.vertices.reserve(into.vertices.size() + mesh.vertices.size());
+  piece.colours.reserve(piece.vertices.capacity());
+  piece.triangles.reserve(into.triangles.size() + mesh.triangles.size());
+  piece.vertices = std::move(into.vertices);
+  piece.colours = std::move(into.colours);
+  piece.triangles = std::move(into.triangles);
+  const auto offset = static_cast<int>(piece.vertices.size());
+  for (std::size_t i = 0; i < mesh.vertices.size(); ++i) {
+    piece.vertices.push_back(mesh.vertices[i].cast<float>());
+    const Eigen::Vector3d byte =
+        (mesh.colors[i].cwiseMax(0.0).cwiseMin(1.0) * 255.0).array().round();
+    piece.colours.push_back({static_cast<std::uint8_t>(byte.x()),
+                             static_cast<std::uint8_t>(byte.y()),
+                             static_cast<std::uint8_t>(byte.z())});
+  }
+  for (const Eigen::Vector3i& t : mesh.triangles) {
+    piece.triangles.push_back(t + Eigen::Vector3i::Constant(offset));
+  }
+  piece.vertices.shrink_to_fit();
+  piece.colours.shrink_to_fit();
+  piece.triangles.shrink_to_fit();
+  into = std::move(piece);
+}
+
+std::size_t TsdfMap::bytesOf(const SurfacePiece& piece) {
+  return piece.vertices.capacity() * (sizeof(Eigen::Vector3f) + 3) +
+         piece.triangles.capacity() * sizeof(Eigen::Vector3i);
+}
+
 SurfaceMesh TsdfMap::extractMesh() const {
   SurfaceMesh out;
   // A block fused again since its release holds its surface itself.
   const auto& units = volume_->tsdf.volume_units_;
   for (const auto& [key, piece] : released_pieces_) {
-    if (units.count(Eigen::Vector3i(key[0], key[1], key[2])) == 0) append(piece, out);
+    if (units.count(Eigen::Vector3i(key[0], key[1], key[2])) != 0) continue;
+    const auto offset = static_cast<int>(out.vertices.size());
+    for (std::size_t i = 0; i < piece.vertices.size(); ++i) {
+      out.vertices.push_back(piece.vertices[i].cast<double>());
+      const auto& rgb = piece.colours[i];
+      out.colors.emplace_back(rgb[0] / 255.0, rgb[1] / 255.0, rgb[2] / 255.0);
+    }
+    for (const Eigen::Vector3i& t : piece.triangles) {
+      out.triangles.push_back(t + Eigen::Vector3i::Constant(offset));
+    }
   }
   const auto live = volume_->tsdf.ExtractTriangleMesh();
   append(live->vertices_, live->vertex_colors_, live->triangles_, out);
@@ -225,12 +263,13 @@ std::size_t TsdfMap::releaseBlocksBehind(const core::Isometry& T_W_C, double dis
   // strays into a neighbouring block (the seam) joins that block's piece.
   for (auto& [key, piece] : piecesByBlock(*released->ExtractTriangleMesh(), block_m)) {
     const Eigen::Vector3i index(key[0], key[1], key[2]);
-    SurfaceMesh& kept = released_pieces_[key];
+    SurfacePiece& kept = released_pieces_[key];
     released_bytes_ -= bytesOf(kept);
     if (released->volume_units_.count(index) == 0) {
-      append(piece, kept);
+      keep(piece, kept);
     } else if (2 * piece.triangles.size() >= kept.triangles.size()) {
-      kept = std::move(piece);
+      kept = SurfacePiece{};
+      keep(piece, kept);
     }
     released_bytes_ += bytesOf(kept);
   }

@@ -81,6 +81,9 @@ fusion::SurfaceMesh finalMesh(RunParts& parts, LoopFigures& loops) {
   }
   const auto start = std::chrono::steady_clock::now();
   const loop::MapCorrection correction = parts.loop_closer->graph().correction();
+  // The surface at the tracked poses stays as the fallback; its volume (the run's largest
+  // store) is freed before the second volume is fused.
+  fusion::SurfaceMesh tracked = parts.integration.takeSurface();
   try {
     fusion::SurfaceMesh mesh =
         log->rebuild(parts.integration.map().config(),
@@ -93,7 +96,7 @@ fusion::SurfaceMesh finalMesh(RunParts& parts, LoopFigures& loops) {
     return mesh;
   } catch (const core::Error& e) {
     spdlog::warn("mesh.ply stays at the tracked poses: {}", e.what());
-    return parts.integration.map().extractMesh();
+    return tracked;
   }
 }
 

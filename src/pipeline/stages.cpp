@@ -269,6 +269,12 @@ void IntegrationStage::keepFramesForCorrection(const std::filesystem::path& dir)
   log_ = std::make_unique<fusion::ReintegrationLog>(dir, map_.config().integration_scale);
 }
 
+fusion::SurfaceMesh IntegrationStage::takeSurface() {
+  fusion::SurfaceMesh surface = map_.extractMesh();
+  map_.clear();
+  return surface;
+}
+
 IntegrationFigures IntegrationStage::figures() const {
   IntegrationFigures figures = figures_;
   figures.tsdf_bytes = map_.memoryBytes();

@@ -1,5 +1,8 @@
+#include <algorithm>
+#include <array>
 #include <fstream>
 #include <iterator>
+#include <map>
 
 #include <gtest/gtest.h>
 
@@ -130,10 +133,62 @@ TEST(TsdfMap, AWallReleasedLapAfterLapIsKeptOnce) {
     EXPECT_EQ(map.releasedSurfaceBytes(), bytes);
     const SurfaceMesh mesh = map.extractMesh();
     EXPECT_EQ(mesh.triangles.size(), triangles);
-    // The bytes kept as pieces are replaced are those of the pieces (nothing is live here).
-    EXPECT_EQ(bytes, mesh.vertices.size() * 2 * sizeof(Eigen::Vector3d) +
+    // The bytes kept as pieces are replaced are those of the pieces (nothing is live here):
+    // float positions, 8-bit colours, triangles.
+    EXPECT_EQ(bytes, mesh.vertices.size() * (sizeof(Eigen::Vector3f) + 3) +
                          mesh.triangles.size() * sizeof(Eigen::Vector3i));
   }
+}
+
+// Released blocks keep their surface compactly (float positions, 8-bit colours) but the same:
+// released all at once, the mesh has the live mesh's triangles, area and colour.
+TEST(TsdfMap, ReleasedSurfaceIsTheLiveSurfaceToFloatAndByteRounding) {
+  TsdfMap map(TsdfConfig{});
+  const core::Intrinsics k = test::kinectIntrinsics();
+  const Eigen::Vector3d n = Eigen::Vector3d(0.2, -0.1, -1.0).normalized();
+  const core::Isometry T_W_C = core::Isometry::Identity();
+  core::Frame frame = test::renderPlane(k, T_W_C, n, n.dot(Eigen::Vector3d(0, 0, 1.5)));
+  // A colour gradient, so that the colours differ from vertex to vertex.
+  for (int v = 0; v < frame.rgb.rows; ++v) {
+    for (int u = 0; u < frame.rgb.cols; ++u) {
+      frame.rgb.at<cv::Vec3b>(v, u) =
+          cv::Vec3b(static_cast<std::uint8_t>(u * 255 / frame.rgb.cols),
+                    static_cast<std::uint8_t>(v * 255 / frame.rgb.rows), 90);
+    }
+  }
+  map.integrate(frame, T_W_C);
+  const auto area = [](const SurfaceMesh& mesh) {
+    double sum = 0.0;
+    for (const Eigen::Vector3i& t : mesh.triangles) {
+      sum += 0.5 * (mesh.vertices[t[1]] - mesh.vertices[t[0]])
+                       .cross(mesh.vertices[t[2]] - mesh.vertices[t[0]])
+                       .norm();
+    }
+    return sum;
+  };
+  const SurfaceMesh live = map.extractMesh();
+  ASSERT_GT(live.triangles.size(), 1000u);
+  core::Isometry past = core::Isometry::Identity();
+  past.translation() = Eigen::Vector3d(0, 0, 4.0);
+  const std::size_t blocks = map.blockCount();
+  ASSERT_EQ(map.releaseBlocksBehind(past, 0.5), blocks);
+  const SurfaceMesh released = map.extractMesh();
+  EXPECT_EQ(released.triangles.size(), live.triangles.size());
+  EXPECT_NEAR(area(released), area(live), 1e-5 * area(live));
+  // Each kept vertex is a live vertex rounded to float, its colour rounded to 8 bits.
+  std::map<std::array<float, 3>, Eigen::Vector3d> live_colour;
+  for (std::size_t i = 0; i < live.vertices.size(); ++i) {
+    const Eigen::Vector3f p = live.vertices[i].cast<float>();
+    live_colour[{p.x(), p.y(), p.z()}] = live.colors[i];
+  }
+  double worst = 0.0;
+  for (std::size_t i = 0; i < released.vertices.size(); ++i) {
+    const Eigen::Vector3f p = released.vertices[i].cast<float>();
+    const auto it = live_colour.find({p.x(), p.y(), p.z()});
+    ASSERT_NE(it, live_colour.end()) << "vertex " << i << " is not a live vertex";
+    worst = std::max(worst, (released.colors[i] - it->second).cwiseAbs().maxCoeff());
+  }
+  EXPECT_LE(worst, 0.5 / 255.0 + 1e-9);
 }
 
 TEST(TsdfMap, DepthOutsideTheConfiguredRangeIsIgnored) {

@@ -3,6 +3,7 @@
 // no Open3D header leaves the fusion module.
 #include <array>
 #include <cstddef>
+#include <cstdint>
 #include <filesystem>
 #include <map>
 #include <memory>
@@ -69,6 +70,8 @@ class TsdfMap {
 
   // Zero-crossing surface by marching cubes.
   SurfaceMesh extractMesh() const;
+  // Frees every block and released piece: the map is empty again, with its configuration.
+  void clear();
 
   // Frees the blocks far behind the camera at T_W_C: centre farther than distance_m from it and
   // behind its image plane (so nothing the camera looks at is freed and re-allocated). Their
@@ -94,8 +97,19 @@ class TsdfMap {
   struct Volume;
   TsdfConfig config_;
   std::unique_ptr<Volume> volume_;
+  // A released block's surface as compact as the PLY it ends in: float positions, 8-bit
+  // colours, vectors of exactly its size. 15 bytes a vertex and 12 a triangle, against 48 and
+  // 12 (plus the growth slack of push_back) as a SurfaceMesh: a long walk's largest store.
+  struct SurfacePiece {
+    std::vector<Eigen::Vector3f> vertices;
+    std::vector<std::array<std::uint8_t, 3>> colours;
+    std::vector<Eigen::Vector3i> triangles;
+  };
+  // Appends `mesh` to `into`, compacted.
+  static void keep(const SurfaceMesh& mesh, SurfacePiece& into);
+  static std::size_t bytesOf(const SurfacePiece& piece);
   // The surface of the released blocks, by block index (Open3D's key of the block).
-  std::map<std::array<int, 3>, SurfaceMesh> released_pieces_;
+  std::map<std::array<int, 3>, SurfacePiece> released_pieces_;
   std::size_t released_bytes_ = 0;  // of released_pieces_, kept as they change
   int thread_cap_ = 0;            // 0: leave OpenMP's default
 };

@@ -176,6 +176,9 @@ class IntegrationStage {
   FusedFrame process(TrackedFrame tracked);
 
   const fusion::TsdfMap& map() const { return map_; }
+  // The TSDF's surface, its volume freed (at the end of a run, before the volume is fused again
+  // at corrected poses: the two volumes never hold memory at once).
+  fusion::SurfaceMesh takeSurface();
   IntegrationFigures figures() const;
 
   // With loop closure: keeps the first integrated frame of each keyframe in a log under `dir`,
