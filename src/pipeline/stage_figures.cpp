@@ -27,6 +27,7 @@ void FrameFigures::addTo(json& line) const {
   line["planes_ms"] = planes_ms;
   line["tsdf_bytes"] = tsdf_bytes;
   line["tsdf_blocks_released"] = tsdf_blocks_released;
+  line["colour_sample_bytes"] = colour_sample_bytes;
   line["planes_detected"] = planes_detected;
   line["patches_live"] = patches_live;
   line["patches_finalized"] = patches_finalized;

@@ -437,6 +437,9 @@ FusedFrame PlaneStage::process(FusedFrame fused) {
   count(fused.patch_events);
   fused.finalized_patches = snapshotsOf(fused.patch_events);
   map_.releaseIdleSamples(static_cast<long>(fused.frame.index));
+  for (const planes::Patch& patch : map_.patches()) {
+    fused.figures.colour_sample_bytes += patch.samples.bytes();
+  }
   fused.figures.planes_ms = timer_.lastMs();
   fused.figures.patches_live = map_.liveCount();
   fused.figures.patches_finalized = map_.finalizedCount();

@@ -200,6 +200,11 @@ TEST(Pipeline, RunsEveryGoodFrameAndWritesTheOutputs) {
     }
   }
   EXPECT_EQ(lines[3]["index"], 4);  // frame 3 was bad
+  // The patches' colour samples in memory after the last frame: what the end holds (no patch
+  // was out of view long enough to leave memory).
+  EXPECT_GT(lines[6]["colour_sample_bytes"].get<std::size_t>(), 0u);
+  EXPECT_EQ(lines[6]["colour_sample_bytes"].get<std::size_t>(),
+            summary.patches.colour_sample_bytes);
 
   // trajectory.txt: a comment, then the 7 poses the frames were fused at, in TUM format.
   std::ifstream trajectory(out / "trajectory.txt");

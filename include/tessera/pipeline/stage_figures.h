@@ -31,6 +31,7 @@ struct FrameFigures {
   double planes_ms = 0.0;
   std::size_t tsdf_bytes = 0;
   std::size_t tsdf_blocks_released = 0;  // this frame, far behind the camera
+  std::size_t colour_sample_bytes = 0;   // the patches' colour samples in memory (not spilled)
   std::size_t planes_detected = 0;
   std::size_t patches_live = 0, patches_finalized = 0;
   // Live sources: from the frame's arrival at this host to the end of its integration.
