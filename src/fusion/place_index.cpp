@@ -56,8 +56,7 @@ PlaceIndex::Batch PlaceIndex::makeBatch(std::size_t begin, std::size_t end) cons
     std::vector<Entry>& entries = table.entries;
     entries.reserve(end - begin);
     for (std::size_t row = begin; row < end; ++row) {
-      entries.push_back(
-          {keyOf(t, all_.ptr<uchar>(static_cast<int>(row))), static_cast<std::uint32_t>(row)});
+      entries.push_back({keyOf(t, rows_[row]), static_cast<std::uint32_t>(row)});
     }
     std::sort(entries.begin(), entries.end());
     index(table);
@@ -85,7 +84,9 @@ void PlaceIndex::add(int id, const cv::Mat& descriptors) {
   ++keyframe_count_;
   if (!descriptors.empty()) {
     CV_Assert(descriptors.type() == CV_8U && descriptors.cols == kOrbDescriptorBytes);
-    all_.push_back(descriptors);
+    const bool shareable = descriptors.isContinuous() && descriptors.u != nullptr;
+    const cv::Mat& held = held_.emplace_back(shareable ? descriptors : descriptors.clone());
+    for (int r = 0; r < held.rows; ++r) rows_.push_back(held.ptr<uchar>(r));
     owner_.insert(owner_.end(), static_cast<std::size_t>(descriptors.rows), id);
   }
   if (++tail_keyframes_ < batch_keyframes_) return;
@@ -101,7 +102,8 @@ void PlaceIndex::add(int id, const cv::Mat& descriptors) {
 }
 
 std::size_t PlaceIndex::bytes() const {
-  std::size_t total = all_.total() * all_.elemSize() + owner_.capacity() * sizeof(int);
+  std::size_t total = owner_.size() * kOrbDescriptorBytes + owner_.capacity() * sizeof(int) +
+                      rows_.capacity() * sizeof(const uchar*) + held_.capacity() * sizeof(cv::Mat);
   for (const Batch& batch : batches_) {
     for (const Table& table : batch.tables) {
       total += table.entries.capacity() * sizeof(Entry) +
@@ -132,8 +134,7 @@ void PlaceIndex::nearestInBatch(const Batch& batch, const unsigned char* descrip
                           [](const auto& a, const auto& b) { return a.second == b.second; }),
               found.end());
   for (auto& [distance, row] : found) {
-    distance = cv::hal::normHamming(descriptor, all_.ptr<uchar>(static_cast<int>(row)),
-                                    kOrbDescriptorBytes);
+    distance = cv::hal::normHamming(descriptor, rows_[row], kOrbDescriptorBytes);
   }
   const auto kept = std::min(found.size(), static_cast<std::size_t>(std::max(0, k)));
   std::partial_sort(found.begin(), found.begin() + static_cast<std::ptrdiff_t>(kept), found.end());
@@ -184,7 +185,7 @@ std::vector<PlaceCandidate> PlaceIndex::query(const cv::Mat& descriptors,
       const uchar* q = descriptors.ptr<uchar>(row);
       for (std::size_t i = tail; i < owner_.size(); ++i) {
         if (!allowed(owner_[i])) break;
-        vote(row, i, cv::hal::normHamming(q, all_.ptr<uchar>(static_cast<int>(i)), 32));
+        vote(row, i, cv::hal::normHamming(q, rows_[i], kOrbDescriptorBytes));
       }
     }
   }

@@ -74,12 +74,39 @@ TEST(PlaceIndex, HoldsAFewTensOfBytesPerDescriptor) {
   std::mt19937 random(11);
   PlaceIndex index(8);
   for (int id = 0; id < 64; ++id) index.add(id, randomDescriptors(kPerKeyframe, random));
-  // The descriptor (32 bytes), its owner (4) and a (key, row) pair per table (8 each): 68
-  // bytes, and some slack in the arrays.
+  // The descriptor (32 bytes, shared with the caller), its owner (4), where its row lies (8)
+  // and a (key, row) pair per table (8 each): 76 bytes, and some slack in the arrays.
   const double per_descriptor =
       static_cast<double>(index.bytes()) / static_cast<double>(index.descriptors());
-  EXPECT_GE(per_descriptor, 68.0);
+  EXPECT_GE(per_descriptor, 76.0);
   EXPECT_LE(per_descriptor, 100.0);
+}
+
+// The index shares a keyframe's descriptors instead of copying them, and stays right when the
+// caller lets its matrix go; a matrix over the caller's own buffer is copied, since the
+// caller may write the buffer again.
+TEST(PlaceIndex, SharesOwnedDescriptorsAndCopiesBorrowedOnes) {
+  std::mt19937 random(13);
+  PlaceIndex index(2);
+  cv::Mat owned = randomDescriptors(kPerKeyframe, random);
+  const cv::Mat owned_probe = flipped(owned.rowRange(0, 300), 3, random);
+  index.add(0, owned);
+  owned.release();  // the index's reference keeps the data
+  std::vector<uchar> buffer(static_cast<std::size_t>(kPerKeyframe) * 32);
+  const cv::Mat source = randomDescriptors(kPerKeyframe, random);
+  std::copy(source.datastart, source.dataend, buffer.begin());
+  index.add(1, cv::Mat(kPerKeyframe, 32, CV_8U, buffer.data()));
+  std::fill(buffer.begin(), buffer.end(), uchar{0});  // the caller reuses its buffer
+  for (int id = 2; id < 8; ++id) index.add(id, randomDescriptors(kPerKeyframe, random));
+
+  const PlaceQuery query;
+  for (const auto& [id, probe] :
+       {std::pair{0, owned_probe}, std::pair{1, flipped(source.rowRange(0, 300), 3, random)}}) {
+    const std::vector<PlaceCandidate> found = index.query(probe, query);
+    ASSERT_FALSE(found.empty()) << "keyframe " << id;
+    EXPECT_EQ(found.front().keyframe, id);
+    EXPECT_GE(found.front().votes, 290) << "keyframe " << id;
+  }
 }
 
 }  // namespace

@@ -49,7 +49,10 @@ class PlaceIndex {
   PlaceIndex(const PlaceIndex&) = delete;
   PlaceIndex& operator=(const PlaceIndex&) = delete;
 
-  // Adds keyframe `id`'s descriptors (CV_8U rows of 32 bytes; none is fine).
+  // Adds keyframe `id`'s descriptors (CV_8U rows of 32 bytes; none is fine). The index shares
+  // the matrix's data with the caller (the keyframe keeps the same descriptors), so it must
+  // not be written afterwards; a matrix that does not own its data, or is not continuous, is
+  // copied.
   void add(int id, const cv::Mat& descriptors);
 
   // The keyframes that share the most descriptors with `descriptors`, most votes first, each
@@ -59,7 +62,8 @@ class PlaceIndex {
   std::size_t keyframes() const { return keyframe_count_; }
   std::size_t descriptors() const { return owner_.size(); }
   std::size_t indexes() const { return batches_.size(); }
-  // Heap bytes held: the descriptors, their owners and the hash tables.
+  // Heap bytes held: the descriptors (shared with the keyframes), their owners and rows, and
+  // the hash tables.
   std::size_t bytes() const;
 
   static constexpr int kTables = 4;    // hash tables
@@ -68,7 +72,7 @@ class PlaceIndex {
  private:
   struct Entry {
     std::uint32_t key = 0;
-    std::uint32_t row = 0;  // descriptor row in all_
+    std::uint32_t row = 0;  // descriptor row (rows_)
     friend bool operator<(const Entry& a, const Entry& b) {
       return a.key != b.key ? a.key < b.key : a.row < b.row;
     }
@@ -99,7 +103,11 @@ class PlaceIndex {
   std::size_t keyframe_count_ = 0;
   std::size_t tail_keyframes_ = 0;  // keyframes added since the last batch
   std::vector<int> owner_;          // keyframe id of each descriptor row
-  cv::Mat all_;                     // every descriptor, one row each, in owner_ order
+  // Every descriptor row, in owner_ order, where it lies in the matrices added (held_). Shared
+  // rather than copied into one matrix: a copy would be a third of a keyframe's memory again,
+  // and a growing matrix keeps up to half of its capacity unused.
+  std::vector<const uchar*> rows_;
+  std::vector<cv::Mat> held_;
   std::vector<Batch> batches_;      // oldest first; rows after the last are the tail
 };
 
