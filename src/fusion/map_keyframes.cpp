@@ -1,6 +1,7 @@
 #include "tessera/fusion/map_keyframes.h"
 
 #include <cstdint>
+#include <memory>
 
 #include "tessera/core/binary_file.h"
 
@@ -32,7 +33,7 @@ void writeMapKeyframes(const std::filesystem::path& path,
     out.value(keyframe.timestamp_ns);
     const Eigen::Matrix4d T = keyframe.T_W_C.matrix();
     for (int i = 0; i < 16; ++i) out.value(T(i));
-    const FeatureFrame& f = keyframe.features;
+    const FeatureFrame& f = *keyframe.features;
     std::vector<StoredFeature> features;
     features.reserve(f.keypoints.size());
     for (std::size_t i = 0; i < f.keypoints.size(); ++i) {
@@ -58,7 +59,8 @@ std::vector<MapKeyframe> readMapKeyframes(const std::filesystem::path& path) {
     for (int i = 0; i < 16; ++i) T(i) = in.value<double>();
     keyframe.T_W_C.matrix() = T;
     const auto features = in.values<StoredFeature>(kMaxItems);
-    FeatureFrame& f = keyframe.features;
+    auto read = std::make_shared<FeatureFrame>();
+    FeatureFrame& f = *read;
     for (const StoredFeature& s : features) {
       f.keypoints.emplace_back(s.x, s.y, s.size, s.angle, s.response, s.octave, s.class_id);
       f.points_C.emplace_back(s.X, s.Y, s.Z);
@@ -71,6 +73,7 @@ std::vector<MapKeyframe> readMapKeyframes(const std::filesystem::path& path) {
       f.descriptors.create(static_cast<int>(rows), kDescriptorBytes, CV_8U);
       in.bytes(f.descriptors.data, f.descriptors.total());
     }
+    keyframe.features = std::move(read);
   }
   in.expectEnd();
   return keyframes;

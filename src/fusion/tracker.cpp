@@ -182,14 +182,14 @@ struct Keyframe {
   int id = 0;            // in the order made
   TrackedImages images;  // odometry cache built for the destination role
   core::Isometry T_W_C = core::Isometry::Identity();
-  FeatureFrame features;
+  SharedFeatures features;
 };
 
 // A keyframe as kept for relocalisation once its images are dropped.
 struct PastKeyframe {
   int id = -1;  // the keyframe's; its place in the index is its place in State::past
   core::Isometry T_W_C = core::Isometry::Identity();
-  FeatureFrame features;
+  SharedFeatures features;
 };
 
 // The place of the newest kept keyframe older than keyframe `id` in `past` (ascending ids),
@@ -251,7 +251,7 @@ void Tracker::continueMap(const std::vector<MapKeyframe>& keyframes) {
   State& s = *state_;
   if (s.reference) throw core::Error("Tracker::continueMap: call it before the first frame");
   for (const MapKeyframe& keyframe : keyframes) {
-    s.places.add(static_cast<int>(s.past.size()), keyframe.features.descriptors);
+    s.places.add(static_cast<int>(s.past.size()), keyframe.features->descriptors);
     s.past.push_back({s.keyframes_made++, keyframe.T_W_C, keyframe.features});
   }
   s.awaiting_map = !s.past.empty();
@@ -314,10 +314,11 @@ TrackingResult Tracker::track(const core::Frame& frame, const core::Isometry& in
     keyframe->id = s.keyframes_made++;
     keyframe->images = images;
     keyframe->T_W_C = T_W_C;
-    keyframe->features = describeFeatures(images.grey, images.depth_m, k, config_.features);
+    keyframe->features = std::make_shared<const FeatureFrame>(
+        describeFeatures(images.grey, images.depth_m, k, config_.features));
     const bool relocalisation = config_.relocalise_against_all_keyframes && !coveredByPast(T_W_C);
     if (relocalisation) {
-      s.places.add(static_cast<int>(s.past.size()), keyframe->features.descriptors);
+      s.places.add(static_cast<int>(s.past.size()), keyframe->features->descriptors);
       s.past.push_back({keyframe->id, T_W_C, keyframe->features});
     }
     auto record = std::make_shared<KeyframeRecord>();
@@ -377,7 +378,7 @@ TrackingResult Tracker::track(const core::Frame& frame, const core::Isometry& in
     for (const PlaceCandidate& candidate : candidates) {
       if (static_cast<std::size_t>(candidate.keyframe) < s.first_in_frame) continue;
       const PastKeyframe& key = s.past[static_cast<std::size_t>(candidate.keyframe)];
-      const auto pose = estimateFeaturePose(key.features, *current_features, k, config_.features);
+      const auto pose = estimateFeaturePose(*key.features, *current_features, k, config_.features);
       if (pose) return core::Isometry(key.T_W_C * pose->T_current_reference.inverse());
     }
     return std::nullopt;
@@ -458,7 +459,7 @@ TrackingResult Tracker::track(const core::Frame& frame, const core::Isometry& in
     if (!current_features) {
       current_features = describeFeatures(current.grey, current.depth_m, k, config_.features);
     }
-    const auto pose = estimateFeaturePose(key.features, *current_features, k, config_.features);
+    const auto pose = estimateFeaturePose(*key.features, *current_features, k, config_.features);
     if (pose) {
       T_W_guess = key.T_W_C * pose->T_current_reference.inverse();
       result.from_features = true;

@@ -165,7 +165,7 @@ void LoopGraph::add(const fusion::KeyframeRecord& record, bool depth_thinned) {
       following_revisit || adrift || query.id % config_.query_every_n_keyframes == 0;
   if (lookup && place.newest_allowed >= 0) {
     candidates = index_.query(
-        fusion::strongestDescriptors(query.features, config_.query_descriptors), place);
+        fusion::strongestDescriptors(*query.features, config_.query_descriptors), place);
   }
   stats_.place_lookup_ms += msSince(lookup_start);
   // A revisit still looks itself up (above) but does not stand for its place: the older
@@ -175,7 +175,7 @@ void LoopGraph::add(const fusion::KeyframeRecord& record, bool depth_thinned) {
     ++stats_.keyframes_covered;
   } else {
     const auto index_start = std::chrono::steady_clock::now();
-    index_.add(query.id, query.features.descriptors);
+    index_.add(query.id, query.features->descriptors);
     kept_.push_back(query.id);
     stats_.place_index_ms += msSince(index_start);
   }
@@ -251,7 +251,7 @@ bool LoopGraph::coveredByOlder(int query) const {
 }
 
 void LoopGraph::release(KeyframeView& key) {
-  key.features = fusion::FeatureFrame{};
+  key.features = std::make_shared<const fusion::FeatureFrame>();
   key.depth_m.release();
 }
 

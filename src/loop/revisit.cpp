@@ -53,8 +53,8 @@ std::shared_ptr<o3d::geometry::PointCloud> cloudOf(const KeyframeView& key, int 
 
 std::optional<Revisit> verifyRevisit(const KeyframeView& match, const KeyframeView& query,
                                      const LoopConfig& config, std::string& why) {
-  const auto pose =
-      fusion::estimateFeaturePose(match.features, query.features, query.intrinsics, config.features);
+  const auto pose = fusion::estimateFeaturePose(*match.features, *query.features, query.intrinsics,
+                                                config.features);
   if (!pose) {
     why = "features give no pose";
     return std::nullopt;

@@ -56,7 +56,7 @@ TEST(PlaceRecognition, FindsARenderedRevisitAndNotADistinctPlace) {
     const core::Isometry pose = loop_scene.cameraPose(frame);
     const auto record = keyframeOf(test::officeFrameAt(loop_scene, pose, frame), pose);
     keyframes.push_back(viewOf(record, static_cast<int>(keyframes.size()), config));
-    index.add(keyframes.back().id, record.features.descriptors);
+    index.add(keyframes.back().id, record.features->descriptors);
   }
   fusion::PlaceQuery query;
   query.min_votes = config.min_votes;
@@ -67,7 +67,7 @@ TEST(PlaceRecognition, FindsARenderedRevisitAndNotADistinctPlace) {
   const auto revisit =
       keyframeOf(test::officeFrameAt(loop_scene, revisit_pose, 8401), revisit_pose);
   const auto found =
-      index.query(fusion::strongestDescriptors(revisit.features, config.query_descriptors), query);
+      index.query(fusion::strongestDescriptors(*revisit.features, config.query_descriptors), query);
   // The loop graph checks the candidates in turn: the first that passes is the place revisited.
   std::string why;
   std::optional<Revisit> checked;
@@ -93,7 +93,7 @@ TEST(PlaceRecognition, FindsARenderedRevisitAndNotADistinctPlace) {
   const core::Isometry elsewhere = loop_scene.cameraPose(700);
   const auto distinct = keyframeOf(test::officeFrameAt(loop_scene, elsewhere, 7002), elsewhere);
   for (const fusion::PlaceCandidate& candidate : index.query(
-           fusion::strongestDescriptors(distinct.features, config.query_descriptors), query)) {
+           fusion::strongestDescriptors(*distinct.features, config.query_descriptors), query)) {
     EXPECT_FALSE(verifyRevisit(keyframes[static_cast<std::size_t>(candidate.keyframe)],
                                viewOf(distinct, 101, config), config, why))
         << "a view of the north corridor passed as keyframe " << candidate.keyframe;

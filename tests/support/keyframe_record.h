@@ -23,8 +23,8 @@ inline fusion::KeyframeRecord keyframeRecordOf(const core::Frame& frame,
   cv::cvtColor(core::registerColourToDepth(frame), grey, cv::COLOR_RGB2GRAY);
   frame.depth_mm.convertTo(record.depth_m, CV_32F, 1e-3);
   record.depth_m.setTo(std::numeric_limits<float>::quiet_NaN(), frame.depth_mm == 0);
-  record.features =
-      fusion::describeFeatures(grey, record.depth_m, frame.intrinsics, fusion::FeaturePoseConfig{});
+  record.features = std::make_shared<const fusion::FeatureFrame>(fusion::describeFeatures(
+      grey, record.depth_m, frame.intrinsics, fusion::FeaturePoseConfig{}));
   record.timestamp_ns = timestamp_ns;
   record.T_W_C = T_W_C;
   record.intrinsics = frame.intrinsics;

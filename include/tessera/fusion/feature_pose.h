@@ -6,6 +6,7 @@
 // Levenberg-Marquardt on the inliers; the inliers' depths in the current frame must agree.
 //
 // Thread-safety: pure functions of their arguments; safe to call concurrently.
+#include <memory>
 #include <optional>
 #include <vector>
 
@@ -52,6 +53,10 @@ struct FeatureFrame {
   // keypoint is missing, outside the depth range, or on a depth edge.
   std::vector<cv::Point3f> points_C;
 };
+
+// A keyframe's features as its holders share them (the tracker, loop closure and the saved
+// map each keep every keyframe: about 70 KB of features each, which copies would triple).
+using SharedFeatures = std::shared_ptr<const FeatureFrame>;
 
 // Describes a frame as the tracker holds it: `grey` CV_8UC1 (colour registered to depth),
 // `depth_m` CV_32FC1 in metres with NaN (or 0) where invalid, both at the size of `k`.

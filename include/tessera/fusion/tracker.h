@@ -70,7 +70,7 @@ enum class TrackingStatus { kFirst, kTracked, kLost, kRelocalised, kRestarted };
 struct KeyframeRecord {
   std::int64_t timestamp_ns = 0;
   core::Isometry T_W_C = core::Isometry::Identity();
-  FeatureFrame features;
+  SharedFeatures features = std::make_shared<const FeatureFrame>();
   cv::Mat depth_m;  // CV_32FC1 at the frame's size; shared with the tracker, not to be written
   core::Intrinsics intrinsics;
   // Tracking restarted here after a loss, or was relocalised against an old keyframe: its pose
@@ -96,7 +96,7 @@ struct TrackingResult {
 struct MapKeyframe {
   std::int64_t timestamp_ns = 0;
   core::Isometry T_W_C = core::Isometry::Identity();
-  FeatureFrame features;
+  SharedFeatures features = std::make_shared<const FeatureFrame>();
 };
 
 // Not thread-safe: owned by the fusion stage, which runs serially.

@@ -25,7 +25,7 @@ struct KeyframeView {
   int id = -1;
   std::int64_t timestamp_ns = 0;
   core::Isometry T_W_C = core::Isometry::Identity();  // as tracked
-  fusion::FeatureFrame features;
+  fusion::SharedFeatures features = std::make_shared<const fusion::FeatureFrame>();
   core::Intrinsics intrinsics;  // of the full frame (the features' pixels)
   cv::Mat depth_m;              // every dense_stride-th pixel, metres, NaN where missing
   double travel_m = 0.0;        // camera path length from the first keyframe, as tracked
