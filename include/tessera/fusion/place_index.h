@@ -104,8 +104,8 @@ class PlaceIndex {
   std::size_t tail_keyframes_ = 0;  // keyframes added since the last batch
   std::vector<int> owner_;          // keyframe id of each descriptor row
   // Every descriptor row, in owner_ order, where it lies in the matrices added (held_). Shared
-  // rather than copied into one matrix: a copy would be a third of a keyframe's memory again,
-  // and a growing matrix keeps up to half of its capacity unused.
+  // rather than copied into one matrix: the copy doubled the descriptors' memory, and a growing
+  // matrix keeps up to half of its capacity unused.
   std::vector<const uchar*> rows_;
   std::vector<cv::Mat> held_;
   std::vector<Batch> batches_;      // oldest first; rows after the last are the tail
