@@ -178,30 +178,22 @@ std::map<BlockKey, SurfaceMesh> piecesByBlock(const o3d::geometry::TriangleMesh&
 }  // namespace
 
 void TsdfMap::keep(const SurfaceMesh& mesh, SurfacePiece& into) {
-  // Built to size: push_back's growth would leave up to half of each vector unused.
-  SurfacePiece piece;
-  piece.vertices.reserve(into.vertices.size() + mesh.vertices.size());
-  piece.colours.reserve(piece.vertices.capacity());
-  piece.triangles.reserve(into.triangles.size() + mesh.triangles.size());
-  piece.vertices = std::move(into.vertices);
-  piece.colours = std::move(into.colours);
-  piece.triangles = std::move(into.triangles);
-  const auto offset = static_cast<int>(piece.vertices.size());
+  // Reserved to the exact size: push_back's growth would leave up to half of each vector unused.
+  const auto offset = static_cast<int>(into.vertices.size());
+  into.vertices.reserve(into.vertices.size() + mesh.vertices.size());
+  into.colours.reserve(into.vertices.capacity());
+  into.triangles.reserve(into.triangles.size() + mesh.triangles.size());
   for (std::size_t i = 0; i < mesh.vertices.size(); ++i) {
-    piece.vertices.push_back(mesh.vertices[i].cast<float>());
+    into.vertices.push_back(mesh.vertices[i].cast<float>());
     const Eigen::Vector3d byte =
         (mesh.colors[i].cwiseMax(0.0).cwiseMin(1.0) * 255.0).array().round();
-    piece.colours.push_back({static_cast<std::uint8_t>(byte.x()),
-                             static_cast<std::uint8_t>(byte.y()),
-                             static_cast<std::uint8_t>(byte.z())});
+    into.colours.push_back({static_cast<std::uint8_t>(byte.x()),
+                            static_cast<std::uint8_t>(byte.y()),
+                            static_cast<std::uint8_t>(byte.z())});
   }
   for (const Eigen::Vector3i& t : mesh.triangles) {
-    piece.triangles.push_back(t + Eigen::Vector3i::Constant(offset));
+    into.triangles.push_back(t + Eigen::Vector3i::Constant(offset));
   }
-  piece.vertices.shrink_to_fit();
-  piece.colours.shrink_to_fit();
-  piece.triangles.shrink_to_fit();
-  into = std::move(piece);
 }
 
 std::size_t TsdfMap::bytesOf(const SurfacePiece& piece) {

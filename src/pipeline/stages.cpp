@@ -437,9 +437,7 @@ FusedFrame PlaneStage::process(FusedFrame fused) {
   count(fused.patch_events);
   fused.finalized_patches = snapshotsOf(fused.patch_events);
   map_.releaseIdleSamples(static_cast<long>(fused.frame.index));
-  for (const planes::Patch& patch : map_.patches()) {
-    fused.figures.colour_sample_bytes += patch.samples.bytes();
-  }
+  fused.figures.colour_sample_bytes = colourSampleBytes();
   fused.figures.planes_ms = timer_.lastMs();
   fused.figures.patches_live = map_.liveCount();
   fused.figures.patches_finalized = map_.finalizedCount();
@@ -449,10 +447,8 @@ FusedFrame PlaneStage::process(FusedFrame fused) {
 PlaneFigures PlaneStage::figures() const {
   PlaneFigures figures = figures_;
   figures.patches_finalized = map_.finalizedCount();
-  for (const planes::Patch& patch : map_.patches()) {
-    figures.colour_samples += patch.samples.size();
-    figures.colour_sample_bytes += patch.samples.bytes();
-  }
+  for (const planes::Patch& patch : map_.patches()) figures.colour_samples += patch.samples.size();
+  figures.colour_sample_bytes = colourSampleBytes();
   figures.samples_released = map_.samplesReleased();
   return figures;
 }
@@ -490,6 +486,12 @@ std::vector<planes::PatchEvent> PlaneStage::finish() {
 std::vector<planes::PatchSnapshot> PlaneStage::snapshotsOf(
     const std::vector<planes::PatchEvent>& events) const {
   return snapshots(planes::finalizedIds(events));
+}
+
+std::size_t PlaneStage::colourSampleBytes() const {
+  std::size_t bytes = 0;
+  for (const planes::Patch& patch : map_.patches()) bytes += patch.samples.bytes();
+  return bytes;
 }
 
 std::vector<planes::PatchSnapshot> PlaneStage::snapshots(const std::vector<int>& ids) const {

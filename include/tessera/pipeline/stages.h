@@ -243,6 +243,8 @@ class PlaneStage {
   core::Isometry loopMotion(std::int64_t keyframe_ns) const;
   std::vector<planes::PatchSnapshot> snapshotsOf(
       const std::vector<planes::PatchEvent>& events) const;
+  // The patches' colour samples in memory (spilled ones are on disk).
+  std::size_t colourSampleBytes() const;
   // Every N-th frame (patches.colour_every_n_frames), and any frame the camera has moved
   // more than 5 cm or 3 degrees from since the last one sampled.
   bool wantsColours(std::uint64_t index, const core::Isometry& T_W_C) const;
