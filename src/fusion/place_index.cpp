@@ -56,7 +56,9 @@ PlaceIndex::Batch PlaceIndex::makeBatch(std::size_t begin, std::size_t end) cons
     std::vector<Entry>& entries = table.entries;
     entries.reserve(end - begin);
     for (std::size_t row = begin; row < end; ++row) {
-      entries.push_back({keyOf(t, rows_[row]), static_cast<std::uint32_t>(row)});
+      if (rows_[row] != nullptr) {
+        entries.push_back({keyOf(t, rows_[row]), static_cast<std::uint32_t>(row)});
+      }
     }
     std::sort(entries.begin(), entries.end());
     index(table);
@@ -64,7 +66,7 @@ PlaceIndex::Batch PlaceIndex::makeBatch(std::size_t begin, std::size_t end) cons
   return batch;
 }
 
-PlaceIndex::Batch PlaceIndex::merge(const Batch& older, const Batch& newer) {
+PlaceIndex::Batch PlaceIndex::merge(const Batch& older, const Batch& newer) const {
   Batch merged;
   merged.begin = older.begin;
   merged.end = newer.end;
@@ -75,6 +77,11 @@ PlaceIndex::Batch PlaceIndex::merge(const Batch& older, const Batch& newer) {
     std::vector<Entry>& entries = merged.tables[t].entries;
     entries.reserve(a.size() + b.size());
     std::merge(a.begin(), a.end(), b.begin(), b.end(), std::back_inserter(entries));
+    // A removed keyframe's entries go here.
+    entries.erase(std::remove_if(entries.begin(), entries.end(),
+                                 [this](const Entry& e) { return rows_[e.row] == nullptr; }),
+                  entries.end());
+    entries.shrink_to_fit();
     index(merged.tables[t]);
   }
   return merged;
@@ -86,6 +93,7 @@ void PlaceIndex::add(int id, const cv::Mat& descriptors) {
     CV_Assert(descriptors.type() == CV_8U && descriptors.cols == kOrbDescriptorBytes);
     const bool shareable = descriptors.isContinuous() && descriptors.u != nullptr;
     const cv::Mat& held = held_.emplace_back(shareable ? descriptors : descriptors.clone());
+    held_ids_.push_back(id);
     for (int r = 0; r < held.rows; ++r) rows_.push_back(held.ptr<uchar>(r));
     owner_.insert(owner_.end(), static_cast<std::size_t>(descriptors.rows), id);
   }
@@ -101,9 +109,22 @@ void PlaceIndex::add(int id, const cv::Mat& descriptors) {
   }
 }
 
+void PlaceIndex::remove(int id) {
+  const auto held = std::lower_bound(held_ids_.begin(), held_ids_.end(), id);
+  const auto first = std::lower_bound(owner_.begin(), owner_.end(), id);
+  if (first == owner_.end() || *first != id || held == held_ids_.end() || *held != id) return;
+  if (rows_[static_cast<std::size_t>(first - owner_.begin())] == nullptr) return;  // removed
+  const auto last = std::upper_bound(first, owner_.end(), id);
+  std::fill(rows_.begin() + (first - owner_.begin()), rows_.begin() + (last - owner_.begin()),
+            nullptr);
+  held_[static_cast<std::size_t>(held - held_ids_.begin())].release();
+  ++removed_keyframes_;
+}
+
 std::size_t PlaceIndex::bytes() const {
-  std::size_t total = owner_.size() * kOrbDescriptorBytes + owner_.capacity() * sizeof(int) +
-                      rows_.capacity() * sizeof(const uchar*) + held_.capacity() * sizeof(cv::Mat);
+  std::size_t total = owner_.capacity() * sizeof(int) + rows_.capacity() * sizeof(const uchar*) +
+                      held_.capacity() * sizeof(cv::Mat) + held_ids_.capacity() * sizeof(int);
+  for (const cv::Mat& held : held_) total += held.total() * held.elemSize();
   for (const Batch& batch : batches_) {
     for (const Table& table : batch.tables) {
       total += table.entries.capacity() * sizeof(Entry) +
@@ -124,7 +145,7 @@ void PlaceIndex::nearestInBatch(const Batch& batch, const unsigned char* descrip
     const auto last = table.entries.begin() + table.starts[prefix + 1];
     for (auto it = std::lower_bound(first, last, Entry{key, 0}); it != last && it->key == key;
          ++it) {
-      found.emplace_back(0, it->row);
+      if (rows_[it->row] != nullptr) found.emplace_back(0, it->row);
     }
   }
   // A row sharing keys in several tables is one neighbour.
@@ -185,6 +206,7 @@ std::vector<PlaceCandidate> PlaceIndex::query(const cv::Mat& descriptors,
       const uchar* q = descriptors.ptr<uchar>(row);
       for (std::size_t i = tail; i < owner_.size(); ++i) {
         if (!allowed(owner_[i])) break;
+        if (rows_[i] == nullptr) continue;
         vote(row, i, cv::hal::normHamming(q, rows_[i], kOrbDescriptorBytes));
       }
     }

@@ -188,6 +188,7 @@ struct Keyframe {
 // A keyframe as kept for relocalisation once its images are dropped.
 struct PastKeyframe {
   int id = -1;  // the keyframe's; its place in the index is its place in State::past
+  std::int64_t timestamp_ns = 0;
   core::Isometry T_W_C = core::Isometry::Identity();
   SharedFeatures features;
 };
@@ -235,6 +236,9 @@ struct Tracker::State {
   // past[i] for i below this is a continued map's keyframe in another frame than this
   // session's (the session was not found in it): never a relocalisation candidate.
   std::size_t first_in_frame = 0;
+  // This session's keyframes start at past[continued]; earlier ones are a continued map's.
+  std::size_t continued = 0;
+  bool cover_by_loop_closure = false;  // leaveCoverToLoopClosure()
 };
 
 Tracker::Tracker(const TrackerConfig& config)
@@ -252,9 +256,34 @@ void Tracker::continueMap(const std::vector<MapKeyframe>& keyframes) {
   if (s.reference) throw core::Error("Tracker::continueMap: call it before the first frame");
   for (const MapKeyframe& keyframe : keyframes) {
     s.places.add(static_cast<int>(s.past.size()), keyframe.features->descriptors);
-    s.past.push_back({s.keyframes_made++, keyframe.T_W_C, keyframe.features});
+    s.past.push_back(
+        {s.keyframes_made++, keyframe.timestamp_ns, keyframe.T_W_C, keyframe.features});
   }
   s.awaiting_map = !s.past.empty();
+  s.continued = s.past.size();
+}
+
+void Tracker::leaveCoverToLoopClosure() {
+  if (state_->reference) {
+    throw core::Error("Tracker::leaveCoverToLoopClosure: call it before the first frame");
+  }
+  state_->cover_by_loop_closure = true;
+}
+
+std::size_t Tracker::forgetKeyframes(const std::vector<std::int64_t>& timestamps_ns) {
+  State& s = *state_;
+  std::size_t forgotten = 0;
+  // This session's keyframes ascend in time.
+  const auto first = s.past.begin() + static_cast<std::ptrdiff_t>(s.continued);
+  for (const std::int64_t t : timestamps_ns) {
+    const auto it = std::partition_point(first, s.past.end(),
+                                         [t](const PastKeyframe& p) { return p.timestamp_ns < t; });
+    if (it == s.past.end() || it->timestamp_ns != t || it->features == nullptr) continue;
+    s.places.remove(static_cast<int>(it - s.past.begin()));
+    it->features.reset();
+    ++forgotten;
+  }
+  return forgotten;
 }
 
 TrackingResult Tracker::track(const core::Frame& frame, const core::Isometry& initial_T_W_C) {
@@ -294,7 +323,10 @@ TrackingResult Tracker::track(const core::Frame& frame, const core::Isometry& in
   };
   // Whether a keyframe at T_W_C revisits the place of one kept before the recent ones.
   const auto coveredByPast = [&](const core::Isometry& T_W_C) {
-    if (config_.relocalisation_cover_radius_m <= 0.0 || s.keyframes.empty()) return false;
+    if (s.cover_by_loop_closure || config_.relocalisation_cover_radius_m <= 0.0 ||
+        s.keyframes.empty()) {
+      return false;
+    }
     const int recent = s.keyframes.front()->id;
     for (auto past = s.past.begin() + static_cast<std::ptrdiff_t>(s.first_in_frame);
          past != s.past.end(); ++past) {
@@ -319,7 +351,7 @@ TrackingResult Tracker::track(const core::Frame& frame, const core::Isometry& in
     const bool relocalisation = config_.relocalise_against_all_keyframes && !coveredByPast(T_W_C);
     if (relocalisation) {
       s.places.add(static_cast<int>(s.past.size()), keyframe->features->descriptors);
-      s.past.push_back({keyframe->id, T_W_C, keyframe->features});
+      s.past.push_back({keyframe->id, timestamp_ns, T_W_C, keyframe->features});
     }
     auto record = std::make_shared<KeyframeRecord>();
     record->timestamp_ns = timestamp_ns;

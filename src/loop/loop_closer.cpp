@@ -5,6 +5,7 @@
 #include <unistd.h>
 
 #include <exception>
+#include <utility>
 
 #include <omp.h>
 
@@ -57,6 +58,10 @@ void LoopCloser::work() {
     }
     try {
       graph_.add(*next, true);
+      if (graph_.keyframes().back().covered) {
+        const std::lock_guard<std::mutex> lock(published_mutex_);
+        covered_ns_.push_back(next->timestamp_ns);
+      }
       publish();
     } catch (const std::exception& e) {
       // A keyframe loop closure cannot use costs only its own loops, never the run.
@@ -69,6 +74,11 @@ void LoopCloser::work() {
   } catch (const std::exception& e) {
     spdlog::warn("loop closure: the final optimisation failed: {}", e.what());
   }
+}
+
+std::vector<std::int64_t> LoopCloser::takeCovered() {
+  const std::lock_guard<std::mutex> lock(published_mutex_);
+  return std::exchange(covered_ns_, {});
 }
 
 std::shared_ptr<const MapCorrection> LoopCloser::correction() const {

@@ -67,6 +67,7 @@ RunParts::RunParts(core::FrameSource& input, const RunConfig& config, const RunO
              loop_closer.get(), options.listener, config.pipeline.return_freed_memory_s,
              map_saver.get()) {
   planes.spillSamplesTo(sample_dir);
+  if (loop_closer) tracking.followLoopClosure();
   if (loop_closer && config.tsdf.correct_after_loop_closure) {
     integration.keepFramesForCorrection(options.out_dir / "tsdf_frames");
   }

@@ -9,6 +9,19 @@
 
 namespace tessera::pipeline::internal {
 
+TrackedFrame RunStages::track(core::Frame frame) {
+  forgetCoveredKeyframes();
+  return tracking_.process(std::move(frame));
+}
+
+void RunStages::forgetCoveredKeyframes() {
+  if (loop_closer_ == nullptr) return;
+  const std::vector<std::int64_t> covered = loop_closer_->takeCovered();
+  if (covered.empty()) return;
+  tracking_.forgetKeyframes(covered);
+  if (map_saver_ != nullptr) map_saver_->forgetKeyframes(covered);
+}
+
 FusedFrame RunStages::closeLoops(FusedFrame fused) {
   if (map_saver_ != nullptr) map_saver_->addKeyframes(fused.new_keyframes);
   if (loop_closer_ == nullptr) return fused;
@@ -35,6 +48,7 @@ std::vector<planes::PatchEvent> RunStages::finishStream() {
   const auto start = std::chrono::steady_clock::now();
   loop_closer_->finish();
   loop_wait_s_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  forgetCoveredKeyframes();
   return planes_.finishStream(loop_closer_->correction());
 }
 

@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <chrono>
 #include <fstream>
+#include <set>
 
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
@@ -271,6 +272,17 @@ void MapSaver::addKeyframes(
       keyframes_.push_back({keyframe->timestamp_ns, keyframe->T_W_C, keyframe->features});
     }
   }
+}
+
+void MapSaver::forgetKeyframes(const std::vector<std::int64_t>& timestamps_ns) {
+  const std::set<std::int64_t> forget(timestamps_ns.begin(), timestamps_ns.end());
+  const std::lock_guard lock(keyframes_mutex_);
+  const auto first = keyframes_.begin() + static_cast<std::ptrdiff_t>(earlier_keyframes_);
+  keyframes_.erase(std::remove_if(first, keyframes_.end(),
+                                  [&](const fusion::MapKeyframe& k) {
+                                    return forget.count(k.timestamp_ns) > 0;
+                                  }),
+                   keyframes_.end());
 }
 
 void MapSaver::checkpoint(std::int64_t frame_index) {

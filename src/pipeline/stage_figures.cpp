@@ -85,6 +85,8 @@ void TrackingFigures::addTo(json& report) const {
   report["tracking_restarts"] = tracking_restarts;
   report["relocalisations"] = relocalisations;
   report["feature_poses"] = feature_poses;
+  report["keyframes_made"] = keyframes_made;
+  report["relocalisation_keyframes"] = relocalisation_keyframes;
   if (continued_map_keyframes > 0) {
     report["continued_map_keyframes"] = continued_map_keyframes;
     report["continued_map_found_at_frame"] =

@@ -118,7 +118,11 @@ std::optional<core::Isometry> TrackingStage::poseOf(
     problem = "tracking lost: " + tracked.problem;
     return std::nullopt;
   }
-  for (const auto& keyframe : tracked.new_keyframes) keyframe_ns_ = keyframe->timestamp_ns;
+  for (const auto& keyframe : tracked.new_keyframes) {
+    keyframe_ns_ = keyframe->timestamp_ns;
+    ++figures_.keyframes_made;
+    if (keyframe->relocalisation) ++figures_.relocalisation_keyframes;
+  }
   new_keyframes = tracked.new_keyframes;
   if (awaiting_map_) {
     awaiting_map_ = false;
@@ -143,6 +147,15 @@ std::optional<core::Isometry> TrackingStage::poseOf(
                  figures_.tracking_losses);
   }
   return tracked.T_W_C;
+}
+
+void TrackingStage::followLoopClosure() {
+  if (poses_ == PoseSource::kTrack) tracker_.leaveCoverToLoopClosure();
+}
+
+void TrackingStage::forgetKeyframes(const std::vector<std::int64_t>& timestamps_ns) {
+  if (poses_ != PoseSource::kTrack) return;
+  figures_.relocalisation_keyframes -= tracker_.forgetKeyframes(timestamps_ns);
 }
 
 TrackedFrame TrackingStage::process(core::Frame frame) {

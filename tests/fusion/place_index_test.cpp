@@ -110,4 +110,45 @@ TEST(PlaceIndex, SharesOwnedDescriptorsAndCopiesBorrowedOnes) {
 }
 
 }  // namespace
+// A removed keyframe is never a candidate again, lets its descriptors go and loses its table
+// entries when its batch is merged; the others are found as before.
+TEST(PlaceIndex, RemovedKeyframesAreNoCandidatesAndLetTheirDescriptorsGo) {
+  std::mt19937 random(17);
+  PlaceIndex index(4), all(4);
+  std::vector<cv::Mat> keyframes;
+  const auto add = [&](int id) {
+    keyframes.push_back(randomDescriptors(kPerKeyframe, random));
+    index.add(id, keyframes.back());
+    all.add(id, keyframes.back());
+  };
+  for (int id = 0; id < 8; ++id) add(id);
+  index.remove(2);   // in a batch
+  index.remove(2);   // again: nothing more
+  index.remove(20);  // not added: ignored
+  EXPECT_EQ(index.keyframes(), 7u);
+  EXPECT_EQ(keyframes[2].u->refcount, 2);  // the caller's and the other index's
+  EXPECT_EQ(index.bytes(), all.bytes() - 32u * kPerKeyframe);
+  for (int id = 8; id < 12; ++id) add(id);
+  index.remove(9);  // in the tail
+  for (int id = 12; id < 16; ++id) add(id);
+  // Units of 4 merged into one batch of 16 keyframes: the removed ones' entries (8 bytes in
+  // each table) are gone too.
+  EXPECT_EQ(index.indexes(), 1u);
+  EXPECT_EQ(index.bytes(), all.bytes() - 2u * (32u + 8u * PlaceIndex::kTables) * kPerKeyframe);
+
+  const PlaceQuery query;
+  for (int id = 0; id < 16; ++id) {
+    const cv::Mat probe =
+        flipped(keyframes[static_cast<std::size_t>(id)].rowRange(0, 300), 3, random);
+    const std::vector<PlaceCandidate> found = index.query(probe, query);
+    if (id == 2 || id == 9) {
+      EXPECT_TRUE(found.empty()) << "keyframe " << id;
+      continue;
+    }
+    ASSERT_FALSE(found.empty()) << "keyframe " << id;
+    EXPECT_EQ(found.front().keyframe, id);
+    EXPECT_GE(found.front().votes, 290) << "keyframe " << id;
+  }
+}
+
 }  // namespace tessera::fusion

@@ -259,6 +259,44 @@ TEST(Tracker, ALostFrameIsRelocalisedAgainstAKeyframeFromTheStartOfTheRun) {
   EXPECT_NE(walkThenReturn(recent_only).first.status, TrackingStatus::kRelocalised);
 }
 
+// When loop closure decides which keyframes revisit a kept place, the tracker keeps every
+// keyframe to relocalise against until loop closure names it; one named is no longer found.
+TEST(Tracker, AKeyframeLoopClosureCoversIsNoLongerRelocalisedAgainst) {
+  const synthetic::Scene scene =
+      synthetic::loadScene(test::sourceDir() / "config/scenes/office.yaml");
+  const auto walkThenReturn = [&](bool forget_the_start) {
+    Tracker tracker(TrackerConfig{});
+    tracker.leaveCoverToLoopClosure();
+    std::vector<std::int64_t> made;
+    for (int i = 0; i < 150; i += 3) {
+      const core::Frame frame = timedOfficeFrame(scene, i);
+      const TrackingResult result = tracker.track(frame, *frame.T_W_C_gt);
+      EXPECT_NE(result.status, TrackingStatus::kLost) << i;
+      for (const auto& keyframe : result.new_keyframes) {
+        EXPECT_TRUE(keyframe->relocalisation);
+        made.push_back(keyframe->timestamp_ns);
+      }
+    }
+    EXPECT_GT(made.size(), 10u);
+    if (forget_the_start) {
+      // The first half of the walk's keyframes, given twice and with an unknown time.
+      std::vector<std::int64_t> first_half(made.begin(), made.begin() + made.size() / 2);
+      first_half.push_back(first_half.front());
+      first_half.push_back(1);
+      EXPECT_EQ(tracker.forgetKeyframes(first_half), made.size() / 2);
+      EXPECT_EQ(tracker.forgetKeyframes(first_half), 0u);
+    }
+    tracker.sourceInterrupted();
+    core::Frame back = officeFrameAt(scene, moved(scene.cameraPose(0), {0.05, 0.0, 0.0}, 5.0), 500);
+    back.timestamp_ns = 10'000'000'000;
+    return tracker.track(back, core::Isometry::Identity());
+  };
+  const TrackingResult kept = walkThenReturn(false);
+  EXPECT_EQ(kept.status, TrackingStatus::kRelocalised) << kept.problem;
+  EXPECT_TRUE(kept.relocalised_globally);
+  EXPECT_FALSE(walkThenReturn(true).relocalised_globally);
+}
+
 TEST(Tracker, TracksTheRealDiningRoomKeyframesWithinTenCentimetres) {
   // Five real Kinect frames 23 to 73 cm and 4 to 25 degrees apart: beyond dense odometry, so
   // each step is posed from features and refined. Frame-to-frame odometry ended 765 mm off.

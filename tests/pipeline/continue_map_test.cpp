@@ -12,6 +12,7 @@
 #include "tessera/core/error.h"
 #include "tessera/drivers/oni/oni_source.h"
 #include "tessera/eval/run_evaluation.h"
+#include "tessera/fusion/map_keyframes.h"
 #include "tessera/pipeline/run.h"
 
 namespace tessera::pipeline {
@@ -77,6 +78,27 @@ TEST(ContinueMap, TwoSessionsOfTheOfficeEndWithOneMap) {
   EXPECT_GE(figures["plane_recall"].get<double>(), 0.8);
   EXPECT_GE(figures["plane_precision"].get<double>(), 0.99);
   EXPECT_EQ(readJson(out / "map/session.json")["sessions"], 2);
+}
+
+// The whole office, tracked: the keyframes loop closure found revisiting a kept keyframe's
+// place are neither relocalised against nor saved; the saved map holds the others.
+TEST(ContinueMap, TheSavedMapHoldsTheKeyframesLoopClosureKept) {
+  const fs::path recording = test::sourceDir() / "recordings/office.oni";
+  if (!fs::is_regular_file(recording)) {
+    GTEST_SKIP() << recording << " is not rendered (TESSERA_RENDER_DEFAULT_RECORDING=ON)";
+  }
+  const fs::path out = test::freshTempDir();
+  drivers::oni::OniSource source(recording);
+  RunOptions options;
+  options.out_dir = out;
+  runPipeline(source, loadRunConfig(std::nullopt), options);
+  const nlohmann::json report = readJson(out / "report.json");
+  const auto made = report["keyframes_made"].get<std::size_t>();
+  const auto covered = report["loop_keyframes_covered"].get<std::size_t>();
+  EXPECT_EQ(report["keyframes"].get<std::size_t>(), made);
+  EXPECT_GT(covered, 0u);
+  EXPECT_EQ(report["relocalisation_keyframes"].get<std::size_t>(), made - covered);
+  EXPECT_EQ(fusion::readMapKeyframes(out / "map/keyframes.bin").size(), made - covered);
 }
 
 // The state of every file in `dir` (name, size, write time), to show nothing changed.

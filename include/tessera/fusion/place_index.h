@@ -55,11 +55,16 @@ class PlaceIndex {
   // copied.
   void add(int id, const cv::Mat& descriptors);
 
+  // Keyframe `id` is no longer a candidate: its descriptors are let go (the index no longer
+  // shares them), its rows skipped, and their entries dropped when their batch is next merged.
+  // Ids must have been added in ascending order; an id not in the index is ignored.
+  void remove(int id);
+
   // The keyframes that share the most descriptors with `descriptors`, most votes first, each
   // with at least min_votes. A descriptor gives at most one vote to each keyframe.
   std::vector<PlaceCandidate> query(const cv::Mat& descriptors, const PlaceQuery& query) const;
 
-  std::size_t keyframes() const { return keyframe_count_; }
+  std::size_t keyframes() const { return keyframe_count_ - removed_keyframes_; }
   std::size_t descriptors() const { return owner_.size(); }
   std::size_t indexes() const { return batches_.size(); }
   // Heap bytes held: the descriptors (shared with the keyframes), their owners and rows, and
@@ -92,7 +97,7 @@ class PlaceIndex {
   static void index(Table& table);
   std::uint32_t keyOf(int table, const unsigned char* descriptor) const;
   Batch makeBatch(std::size_t begin, std::size_t end) const;
-  static Batch merge(const Batch& older, const Batch& newer);
+  Batch merge(const Batch& older, const Batch& newer) const;
   // The `k` rows of `batch` nearest to `descriptor` among those sharing a key with it, nearest
   // first (ties by row), with their distances.
   void nearestInBatch(const Batch& batch, const unsigned char* descriptor, int k,
@@ -103,11 +108,14 @@ class PlaceIndex {
   std::size_t keyframe_count_ = 0;
   std::size_t tail_keyframes_ = 0;  // keyframes added since the last batch
   std::vector<int> owner_;          // keyframe id of each descriptor row
-  // Every descriptor row, in owner_ order, where it lies in the matrices added (held_). Shared
-  // rather than copied into one matrix: the copy doubled the descriptors' memory, and a growing
-  // matrix keeps up to half of its capacity unused.
+  // Every descriptor row, in owner_ order, where it lies in the matrices added (held_, one per
+  // keyframe with descriptors, whose ids are held_ids_). Shared rather than copied into one
+  // matrix: the copy doubled the descriptors' memory, and a growing matrix keeps up to half of
+  // its capacity unused. A removed keyframe's rows are null.
   std::vector<const uchar*> rows_;
   std::vector<cv::Mat> held_;
+  std::vector<int> held_ids_;
+  std::size_t removed_keyframes_ = 0;
   std::vector<Batch> batches_;      // oldest first; rows after the last are the tail
 };
 

@@ -52,7 +52,8 @@ struct TrackerConfig {
   int relocalisation_min_votes = 12;  // descriptors near a keyframe's for it to be one
   // A new keyframe within this distance and turn (tracked poses) of an older one kept for that
   // lookup revisits its place and is not kept for it: memory grows with the places seen, not
-  // with the time spent in them (0: keep every keyframe).
+  // with the time spent in them (0: keep every keyframe). A run that closes loops leaves this
+  // to loop closure (Tracker::leaveCoverToLoopClosure).
   double relocalisation_cover_radius_m = 0.3;
   double relocalisation_cover_angle_deg = 20.0;
   FeaturePoseConfig features;  // config section tracker_features
@@ -117,6 +118,15 @@ class Tracker {
   // is found they are lost; after lost_frames_before_restart of them the session starts in its
   // own frame at initial_T_W_C, and TrackingResult::problem says so. Call before track().
   void continueMap(const std::vector<MapKeyframe>& keyframes);
+
+  // Loop closure decides which keyframes revisit a kept one's place, at poses it corrected:
+  // a revisit's tracked pose has drifted too far from the first visit's for the tracker's own
+  // test (relocalisation_cover_radius_m). Every keyframe is then kept for relocalisation until
+  // forgetKeyframes() names it. Call before track().
+  void leaveCoverToLoopClosure();
+  // Drops the keyframes of this session taken at these times from those relocalised against
+  // (features and place index); returns how many it dropped.
+  std::size_t forgetKeyframes(const std::vector<std::int64_t>& timestamps_ns);
 
  private:
   struct State;

@@ -5,10 +5,12 @@
 // Thread-safety: add() from one thread (the tracking stage); correction() from any thread at
 // any time; finish() and graph() after the stream has ended.
 #include <condition_variable>
+#include <cstdint>
 #include <deque>
 #include <memory>
 #include <mutex>
 #include <thread>
+#include <vector>
 
 #include "tessera/loop/loop_graph.h"
 
@@ -33,6 +35,11 @@ class LoopCloser {
   // (PlaneStage) follows it while the run goes on.
   std::shared_ptr<const MapCorrection> correction() const;
 
+  // The times of the keyframes found to revisit a kept keyframe's place (LoopConfig::
+  // cover_radius_m, at corrected poses) since the last call: the tracker and the saved map need
+  // not keep them either. Any thread.
+  std::vector<std::int64_t> takeCovered();
+
  private:
   void work();
   // Publishes the graph's correction when it was optimised since the last one published.
@@ -45,6 +52,7 @@ class LoopCloser {
   bool finishing_ = false;
   mutable std::mutex published_mutex_;
   std::shared_ptr<const MapCorrection> published_;
+  std::vector<std::int64_t> covered_ns_;  // guarded by published_mutex_
   std::thread worker_;
 };
 

@@ -92,6 +92,9 @@ struct TrackingFigures {
   std::size_t tracking_restarts = 0;
   std::size_t relocalisations = 0;  // found again after a loss or an interrupted source
   std::size_t feature_poses = 0;    // frames whose solve started from a feature pose
+  std::size_t keyframes_made = 0;
+  // Of those, kept for relocalisation and a later session (not revisits of a kept place).
+  std::size_t relocalisation_keyframes = 0;
   // `--continue`: the earlier session's keyframes, and the frame first found among them.
   std::size_t continued_map_keyframes = 0;
   std::optional<long> continued_map_found_at_frame;

@@ -134,6 +134,12 @@ class TrackingStage {
   // frames are relocalised against them (fusion::Tracker::continueMap).
   void continueMap(const std::vector<fusion::MapKeyframe>& keyframes);
 
+  // The run closes loops: loop closure, at its corrected poses, decides which keyframes
+  // revisit a kept one's place, and forgetKeyframes() passes its decisions on to the tracker
+  // (fusion::Tracker::leaveCoverToLoopClosure).
+  void followLoopClosure();
+  void forgetKeyframes(const std::vector<std::int64_t>& timestamps_ns);
+
   const TrackingFigures& figures() const { return figures_; }
   const StageTimer& timer() const { return timer_; }
 

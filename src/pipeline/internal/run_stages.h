@@ -34,7 +34,7 @@ class RunStages : public FramePath, public PatchPath, public RunReport {
         map_saver_(map_saver) {}
 
   std::optional<core::Frame> next() override { return source_.next(); }
-  TrackedFrame track(core::Frame frame) override { return tracking_.process(std::move(frame)); }
+  TrackedFrame track(core::Frame frame) override;
   FusedFrame integrate(TrackedFrame tracked) override {
     return integration_.process(std::move(tracked));
   }
@@ -58,6 +58,9 @@ class RunStages : public FramePath, public PatchPath, public RunReport {
   double loopWaitS() const { return loop_wait_s_; }
 
  private:
+  // Passes on the keyframes loop closure found revisiting a kept one's place: neither the
+  // tracker nor the saved map keeps them.
+  void forgetCoveredKeyframes();
   // On the committing thread, off the frame path, at most every return_freed_memory_s_.
   void returnFreedMemory();
 

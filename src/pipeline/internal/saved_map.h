@@ -71,6 +71,9 @@ class MapSaver {
 
   // The keyframes the tracker made; those it relocalises against are kept (frame path).
   void addKeyframes(const std::vector<std::shared_ptr<const fusion::KeyframeRecord>>& keyframes);
+  // Drops this session's keyframes taken at these times: revisits of a kept one's place, as
+  // loop closure found (LoopCloser::takeCovered).
+  void forgetKeyframes(const std::vector<std::int64_t>& timestamps_ns);
   // The map's pose of a frame (frame path, after the plane stage).
   void addPose(std::int64_t timestamp_ns, const core::Isometry& T_W_C) {
     trajectory_[timestamp_ns] = T_W_C;
