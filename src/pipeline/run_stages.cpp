@@ -28,6 +28,7 @@ FusedFrame RunStages::closeLoops(FusedFrame fused) {
   for (auto& keyframe : fused.new_keyframes) loop_closer_->add(std::move(keyframe));
   fused.new_keyframes.clear();
   fused.loop_correction = loop_closer_->correction();
+  fused.figures.loop_keyframes_waiting = loop_closer_->waiting();
   return fused;
 }
 

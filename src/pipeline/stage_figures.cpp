@@ -31,6 +31,7 @@ void FrameFigures::addTo(json& line) const {
   line["planes_detected"] = planes_detected;
   line["patches_live"] = patches_live;
   line["patches_finalized"] = patches_finalized;
+  if (loop_keyframes_waiting) line["loop_keyframes_waiting"] = *loop_keyframes_waiting;
   if (latency_ms) line["latency_ms"] = *latency_ms;
 }
 

@@ -35,6 +35,9 @@ class LoopCloser {
   // (PlaneStage) follows it while the run goes on.
   std::shared_ptr<const MapCorrection> correction() const;
 
+  // Keyframes handed over and not yet taken up by the worker. Any thread.
+  std::size_t waiting() const;
+
   // The times of the keyframes found to revisit a kept keyframe's place (LoopConfig::
   // cover_radius_m, at corrected poses) since the last call: the tracker and the saved map need
   // not keep them either. Any thread.
@@ -46,7 +49,7 @@ class LoopCloser {
   void publish();
 
   LoopGraph graph_;
-  std::mutex mutex_;
+  mutable std::mutex mutex_;
   std::condition_variable wake_;
   std::deque<std::shared_ptr<const fusion::KeyframeRecord>> queue_;
   bool finishing_ = false;

@@ -34,6 +34,8 @@ struct FrameFigures {
   std::size_t colour_sample_bytes = 0;   // the patches' colour samples in memory (not spilled)
   std::size_t planes_detected = 0;
   std::size_t patches_live = 0, patches_finalized = 0;
+  // With loop closure: keyframes handed over and not yet taken up by its worker.
+  std::optional<std::size_t> loop_keyframes_waiting;
   // Live sources: from the frame's arrival at this host to the end of its integration.
   std::optional<double> latency_ms;
   void addTo(nlohmann::json& line) const;
