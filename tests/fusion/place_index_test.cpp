@@ -109,7 +109,6 @@ TEST(PlaceIndex, SharesOwnedDescriptorsAndCopiesBorrowedOnes) {
   }
 }
 
-}  // namespace
 // A removed keyframe is never a candidate again, lets its descriptors go and loses its table
 // entries when its batch is merged; the others are found as before.
 TEST(PlaceIndex, RemovedKeyframesAreNoCandidatesAndLetTheirDescriptorsGo) {
@@ -151,4 +150,5 @@ TEST(PlaceIndex, RemovedKeyframesAreNoCandidatesAndLetTheirDescriptorsGo) {
   }
 }
 
+}  // namespace
 }  // namespace tessera::fusion
