@@ -1,13 +1,16 @@
 #pragma once
-// The pose graph of the keyframes, optimised with Open3D's global optimisation
-// (Levenberg-Marquardt with a line process on the loop edges, which prunes loops that
-// disagree with the rest of the graph).
+// The pose graph of the keyframes: Levenberg-Marquardt with a line process on the loop edges
+// (Choi et al. 2015), which prunes loops that disagree with the rest of the graph. Its normal
+// equations are sparse (each node meets its odometry neighbours and a few loops), factorised by
+// Eigen's sparse LDLT: a solve costs about linear time and memory in the nodes. Open3D's
+// GlobalOptimization, which the same method came from, builds them densely (6N x 6N, cubic
+// time and quadratic memory); its conventions are kept, so Open3D's information matrices apply.
 //
-// Open3D weighs each loop by its residual at the start, against a distance: a true loop that
-// closes more drift than that distance starts with almost no weight and is pruned. So the graph
-// is solved twice: first with the distance the loops' drift bound allows (the loops that agree
-// pull the graph together; one far off still loses its weight), then from that solution with
-// Open3D's usual 7.5 cm, where a loop that disagrees with the others is pruned.
+// The line process weighs each loop by its residual at the start, against a distance: a true
+// loop that closes more drift than that distance starts with almost no weight and is pruned.
+// So the graph is solved twice: first with the distance the loops' drift bound allows (the
+// loops that agree pull the graph together; one far off still loses its weight), then from that
+// solution with the usual 7.5 cm, where a loop that disagrees with the others is pruned.
 //
 // Thread-safety: a pure function of its arguments.
 #include <vector>
