@@ -249,14 +249,19 @@ FusedFrame IntegrationStage::process(TrackedFrame tracked) {
     ScopedStageTime time(timer_);
     try {
       if (fused.T_W_C) {
-        map_.integrate(tracked.frame, *fused.T_W_C);
+        const core::Isometry T_W_C_map =
+            loop_correction_
+                ? loop_correction_->at(fused.keyframe_ns.value_or(tracked.frame.timestamp_ns)) *
+                      *fused.T_W_C
+                : *fused.T_W_C;
+        map_.integrate(tracked.frame, T_W_C_map);
         fused.integrated = true;
         if (log_ && fused.keyframe_ns && fused.keyframe_ns != last_logged_keyframe_ns_) {
           log_->keep(tracked.frame, *fused.T_W_C, *fused.keyframe_ns);
           last_logged_keyframe_ns_ = fused.keyframe_ns;
         }
         if (const double distance_m = map_.config().release_distance_m; distance_m > 0.0) {
-          const std::size_t released = map_.releaseBlocksBehind(*fused.T_W_C, distance_m);
+          const std::size_t released = map_.releaseBlocksBehind(T_W_C_map, distance_m);
           fused.figures.tsdf_blocks_released = released;
           figures_.tsdf_blocks_released += released;
         }

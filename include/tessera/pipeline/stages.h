@@ -191,6 +191,12 @@ class IntegrationStage {
   // for the TSDF to be fused again at the corrected poses at the end.
   void keepFramesForCorrection(const std::filesystem::path& dir);
   void shedLoad(LoadShedding shedding) { shedding_ = shedding; }
+  // With loop closure: frames are fused at their keyframe's corrected pose (the newest
+  // correction given), so that a place seen again lands on what was fused there before instead
+  // of beside it, drifted. The log keeps tracked poses: the correction at the end recomputes.
+  void followLoopClosure(std::shared_ptr<const loop::MapCorrection> newest) {
+    loop_correction_ = std::move(newest);
+  }
   // The log, or null without it.
   const fusion::ReintegrationLog* reintegrationLog() const { return log_.get(); }
   const StageTimer& timer() const { return timer_; }
@@ -204,6 +210,7 @@ class IntegrationStage {
   std::unique_ptr<fusion::ReintegrationLog> log_;
   std::optional<std::int64_t> last_logged_keyframe_ns_;
   std::optional<core::Isometry> last_integrated_pose_;
+  std::shared_ptr<const loop::MapCorrection> loop_correction_;
   int posed_since_integrated_ = 0;
   LoadShedding shedding_;
   IntegrationFigures figures_;  // all but tsdf_bytes, read from the map

@@ -36,6 +36,7 @@ class RunStages : public FramePath, public PatchPath, public RunReport {
   std::optional<core::Frame> next() override { return source_.next(); }
   TrackedFrame track(core::Frame frame) override;
   FusedFrame integrate(TrackedFrame tracked) override {
+    if (loop_closer_ != nullptr) integration_.followLoopClosure(loop_closer_->correction());
     return integration_.process(std::move(tracked));
   }
   FusedFrame closeLoops(FusedFrame fused) override;
