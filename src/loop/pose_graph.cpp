@@ -101,7 +101,8 @@ class Solver {
     double cost = costOf(linearisations_);
     buildNormalEquations();
     if (b_.cwiseAbs().maxCoeff() < kMinGradient) return;
-    double lambda = 1e-5 * H_.diagonal().maxCoeff();
+    // Open3D's start; never zero, so that damping can grow when a factorisation fails.
+    double lambda = std::max(1e-5 * H_.diagonal().maxCoeff(), 1e-12);
     double growth = 2.0;
     solver_.analyzePattern(H_);
     for (int iteration = 0; iteration < kMaxIterations && cost >= kMinCost; ++iteration) {
