@@ -3,6 +3,7 @@
 #include <malloc.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cstddef>
 #include <cstdlib>
 #include <cstring>
@@ -24,13 +25,29 @@ double heapInUseMb() {
 
 void returnFreedMemory() { malloc_trim(0); }
 
-void keepFreedMemoryForReuse() {
+namespace {
+
+bool userSetMallocTunables() {
   const char* tunables = std::getenv("GLIBC_TUNABLES");
-  if (tunables != nullptr && std::strstr(tunables, "glibc.malloc.") != nullptr) return;
+  return tunables != nullptr && std::strstr(tunables, "glibc.malloc.") != nullptr;
+}
+
+}  // namespace
+
+void keepFreedMemoryForReuse(int arenas) {
+  if (userSetMallocTunables()) return;
   constexpr int kMmapThreshold = 32 << 20;  // glibc's largest on 64-bit
   constexpr int kTrimThreshold = 128 << 20;
   mallopt(M_MMAP_THRESHOLD, kMmapThreshold);
   mallopt(M_TRIM_THRESHOLD, kTrimThreshold);
+  mallopt(M_ARENA_MAX, std::max(2, arenas));
+}
+
+void returnFreedMemorySooner() {
+  if (userSetMallocTunables()) return;
+  constexpr int kTrimThreshold = 16 << 20;
+  mallopt(M_TRIM_THRESHOLD, kTrimThreshold);
+  malloc_trim(0);
 }
 
 }  // namespace tessera::core

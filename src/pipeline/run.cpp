@@ -50,7 +50,8 @@ void addRunFiles(std::vector<std::filesystem::path>& files, const std::filesyste
 RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
                        const RunOptions& given) {
   RunOptions options = given;
-  core::keepFreedMemoryForReuse();  // returned every return_freed_memory_s instead
+  // Returned every return_freed_memory_s instead; as many arenas as threads run at once.
+  core::keepFreedMemoryForReuse(options.threads > 0 ? options.threads : defaultThreadCount());
   std::optional<internal::SavedMap> earlier;
   if (options.continue_map) {
     // Read whole before anything is written: a map that cannot be continued changes nothing.

@@ -45,6 +45,8 @@ FusedFrame RunStages::findPlanes(FusedFrame fused) {
 }
 
 std::vector<planes::PatchEvent> RunStages::finishStream() {
+  // The frames are over: what the end builds is freed for good, so it is handed back promptly.
+  if (return_freed_memory_s_ > 0.0) core::returnFreedMemorySooner();
   if (loop_closer_ == nullptr) return planes_.finishStream();
   const auto start = std::chrono::steady_clock::now();
   loop_closer_->finish();

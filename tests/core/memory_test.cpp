@@ -1,8 +1,10 @@
-// The memory figures of a long run: the heap in use follows what the program holds, and
-// returning freed memory gives the kernel back pages that a live block above them pinned.
+// The memory figures of a long run: the heap in use follows what the program holds,
+// returning freed memory gives the kernel back pages that a live block above them pinned, and
+// after the frames freed memory goes back as it is freed.
 // Sanitizer builds replace malloc, so there these figures mean nothing and the tests skip.
 #include <malloc.h>
 
+#include <cstdlib>
 #include <cstring>
 #include <memory>
 #include <vector>
@@ -58,6 +60,40 @@ TEST(Memory, ReturningFreedMemoryLowersTheResidentSize) {
   returnFreedMemory();
   EXPECT_GT(kept - residentMb(), 40.0) << "resident " << kept << " MB before";
   EXPECT_GT(residentMb(), 0.0);
+}
+
+// `count` blocks of 1 MB, written.
+std::vector<std::unique_ptr<char[]>> megabytes(int count) {
+  std::vector<std::unique_ptr<char[]>> blocks(static_cast<std::size_t>(count));
+  for (auto& block : blocks) {
+    block = std::make_unique<char[]>(1 << 20);
+    std::memset(block.get(), 1, 1 << 20);
+  }
+  return blocks;
+}
+
+TEST(Memory, AfterTheFramesFreedMemoryGoesBackAsItIsFreed) {
+  if (kSanitized) GTEST_SKIP() << "a sanitizer's allocator keeps its own figures";
+  const char* tunables = std::getenv("GLIBC_TUNABLES");
+  if (tunables != nullptr && std::strstr(tunables, "glibc.malloc.") != nullptr) {
+    GTEST_SKIP() << "GLIBC_TUNABLES sets malloc tunables, which tessera leaves alone";
+  }
+  keepFreedMemoryForReuse(2);
+  // Read once before: the first read allocates what the stream keeps for good, which would
+  // otherwise sit above the blocks and keep the heap from shrinking.
+  residentMb();
+  returnFreedMemory();
+  // During the frames: 48 MB freed at the heap's top stay resident for the next frame.
+  auto blocks = megabytes(48);
+  const double held = residentMb();
+  blocks.clear();
+  EXPECT_LT(held - residentMb(), 8.0) << "resident " << held << " MB while held";
+
+  returnFreedMemorySooner();  // the frames are over
+  blocks = megabytes(48);
+  const double held_again = residentMb();
+  blocks.clear();  // no malloc_trim: the free itself hands the top back
+  EXPECT_GT(held_again - residentMb(), 32.0) << "resident " << held_again << " MB while held";
 }
 
 }  // namespace

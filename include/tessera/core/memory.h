@@ -19,9 +19,19 @@ void returnFreedMemory();
 // heap's top is kept up to 128 MB. A frame's images, point clouds and pyramids are then
 // allocated again in pages already resident, instead of being faulted in afresh each frame
 // (8 % of the CPU of a replay); returnFreedMemory(), called every few seconds, bounds what
-// is kept. runPipeline calls it as a run starts (mallopt is safe with other threads running;
-// calling it again changes nothing). Skipped when GLIBC_TUNABLES sets malloc tunables: the
-// user's choice stands.
-void keepFreedMemoryForReuse();
+// is kept. Threads share at most `arenas` arenas (at least 2): each arena's free top is kept,
+// and with glibc's default (8 per core) a dozen threads' arenas held 300 to 500 MB freed
+// between them on the loop ring. runPipeline calls it as a run starts, with its thread count
+// (mallopt is safe with other threads running; threads that already have an arena keep it).
+// Skipped when GLIBC_TUNABLES sets malloc tunables: the user's choice stands.
+void keepFreedMemoryForReuse(int arenas);
+// Once the frames are over: free space at a heap's top above 16 MB is handed back at the next
+// large free, and what every arena holds now is returned. The threads' own arenas (64 MB each)
+// never trim their tops under keepFreedMemoryForReuse's 128 MB, and malloc_trim leaves those
+// tops alone; the end of a run (the last patches, the TSDF rebuilt, the mesh extracted) then
+// peaks on top of them. On the frame path the lower threshold would fault a frame's buffers in
+// afresh (a quarter more CPU on the loop ring); after it, no such churn is left. Skipped like
+// keepFreedMemoryForReuse.
+void returnFreedMemorySooner();
 
 }  // namespace tessera::core

@@ -39,7 +39,8 @@ struct PipelineConfig {
   double live_patches_waiting_mb = 256.0;
   // Seconds between returns of the freed memory glibc keeps to the kernel (malloc_trim, after
   // a commit, off the frame path); 0: never. Frees on many threads leave free pages in many
-  // arenas that glibc does not give back by itself.
+  // arenas that glibc does not give back by itself. Unless 0, the end of the frames also
+  // returns what is held and lowers the trim threshold (core::returnFreedMemorySooner).
   double return_freed_memory_s = 10.0;
   // Seconds between checkpoints of OUT/map (the state `tessera run --continue` needs), written
   // on the frame path after the plane stage; a run killed outright loses at most this much of
