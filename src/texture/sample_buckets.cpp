@@ -79,7 +79,8 @@ int SampleBuckets::nearest(const Eigen::Vector2d& uv, int max_count, std::vector
     const Kept* k = kept_.data() + first_[static_cast<std::size_t>(y * columns_ + x0)];
     const Kept* end = kept_.data() + first_[static_cast<std::size_t>(y * columns_ + x1 + 1)];
     for (; k < end; ++k) {
-      const double du = k->u - uv.x(), dv = k->v - uv.y();
+      const double du = static_cast<double>(k->u) - uv.x();
+      const double dv = static_cast<double>(k->v) - uv.y();
       const double d2 = du * du + dv * dv;
       found_[within] = {d2, k->index};
       within += d2 <= radius2_ ? 1 : 0;

@@ -28,9 +28,11 @@ class SampleBuckets {
 
  private:
   // The kept samples in bucket order (by index within a bucket), so that a lookup reads each
-  // row of its buckets as one contiguous run; positions as doubles, as the distances are.
+  // row of its buckets as one contiguous run. Positions stay the samples' floats (12 bytes a
+  // sample, not 24: a floor tile's index is tens of MB); distances are taken in doubles, from
+  // the same values.
   struct Kept {
-    double u, v;
+    float u, v;
     int index;
   };
   std::vector<Kept> kept_;
