@@ -30,7 +30,7 @@ void keepFreedMemoryForReuse(int arenas);
 // never trim their tops under keepFreedMemoryForReuse's 128 MB, and malloc_trim leaves those
 // tops alone; the end of a run (the last patches, the TSDF rebuilt, the mesh extracted) then
 // peaks on top of them. On the frame path the lower threshold would fault a frame's buffers in
-// afresh (a quarter more CPU on the loop ring); after it, no such churn is left. Skipped like
+// afresh (15 % more CPU a frame on the loop ring); after it, no such churn is left. Skipped like
 // keepFreedMemoryForReuse.
 void returnFreedMemorySooner();
 
