@@ -161,7 +161,9 @@ std::size_t runGraph(FramePath& frames, PatchPath& patches, RunReport& report,
   std::size_t frames_reported = 0;  // frames of the stream, interruption markers aside
   oneapi::tbb::task_arena arena(threads);
   // Declared before the graph that hands them work, so that they outlive it.
-  internal::BackgroundWorkers describers(threads, options.texture_nice);
+  const int describing =
+      options.describing_threads > 0 ? options.describing_threads : std::max(1, threads / 2);
+  internal::BackgroundWorkers describers(describing, options.texture_nice);
   internal::BackgroundWorkers committer(1, options.texture_nice);
   arena.execute([&] {
     flow::graph graph;
@@ -220,10 +222,10 @@ std::size_t runGraph(FramePath& frames, PatchPath& patches, RunReport& report,
                 std::get<1>(out));
           std::get<0>(out).try_put(std::move(fused));
         });
-    // Bitmaps are built and described independently: as many at once as there are threads,
-    // off the frame path. They are committed one at a time, in finalization order. Both run
-    // on threads of their own at a lower priority (internal/background_workers.h), handed
-    // over by async nodes.
+    // Bitmaps are built and described independently: as many at once as there are describing
+    // threads, off the frame path. They are committed one at a time, in finalization order. Both
+    // run on threads of their own at a lower priority (internal/background_workers.h), handed over
+    // by async nodes.
     using DescribeNode = flow::async_node<JobMessage, DescribedMessage>;
     DescribeNode describe_node(
         graph, flow::unlimited, [&](const JobMessage& job, DescribeNode::gateway_type& gateway) {

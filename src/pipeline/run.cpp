@@ -82,7 +82,8 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
            {options.threads, live ? pipeline.live_frames_in_flight : pipeline.max_frames_in_flight,
             live ? pipeline.texture_nice_live : pipeline.texture_nice_replay,
             pipeline.max_patches_waiting,
-            live ? static_cast<std::size_t>(pipeline.live_patches_waiting_mb * (1 << 20)) : 0});
+            live ? static_cast<std::size_t>(pipeline.live_patches_waiting_mb * (1 << 20)) : 0,
+            pipeline.describing_threads});
   parts.sink.flush();
   parts.store->finishRun(parts.run_id);  // a server's store first sends what its journal holds
   const double wall_s =

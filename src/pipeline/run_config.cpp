@@ -12,6 +12,7 @@ void readConfig(const core::ConfigSection& section, PipelineConfig& config) {
   section.read("live_shed_after_ms", config.live_shed_after_ms);
   section.read("texture_nice_live", config.texture_nice_live);
   section.read("texture_nice_replay", config.texture_nice_replay);
+  section.read("describing_threads", config.describing_threads);
   section.read("max_patches_waiting", config.max_patches_waiting);
   section.read("live_patches_waiting_mb", config.live_patches_waiting_mb);
   section.read("return_freed_memory_s", config.return_freed_memory_s);
@@ -21,6 +22,9 @@ void readConfig(const core::ConfigSection& section, PipelineConfig& config) {
     throw core::ConfigError(
         "pipeline: return_freed_memory_s, checkpoint_every_s, live_shed_after_ms and "
         "live_patches_waiting_mb must be 0 or more");
+  }
+  if (config.describing_threads < 0) {
+    throw core::ConfigError("pipeline: describing_threads must be 0 (half the threads) or more");
   }
   if (config.max_frames_in_flight < 1 || config.live_frames_in_flight < 1 ||
       config.max_patches_waiting < 1) {

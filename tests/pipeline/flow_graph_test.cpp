@@ -143,8 +143,13 @@ class FakeFrames : public FramePath {
 class FakePatches : public PatchPath {
  public:
   DescribedPatch describe(const PatchJob& job) const override {
+    const int now = ++describing;
+    for (int most = max_describing;
+         now > most && !max_describing.compare_exchange_weak(most, now);) {
+    }
     std::mt19937 random(static_cast<unsigned>(job.sequence) + 7);
     nap(random, describe_max_us);  // many at once, finishing out of order
+    --describing;
     while (hold_until != nullptr && !*hold_until) {
       std::this_thread::sleep_for(std::chrono::milliseconds(1));
     }
@@ -180,6 +185,7 @@ class FakePatches : public PatchPath {
   std::atomic<int> out_of_order{0};
   std::vector<int> commit_order;
   mutable std::atomic<int> describe_nice{-100};
+  mutable std::atomic<int> describing{0}, max_describing{0};  // patches being described
   std::atomic<int> commit_nice{-100}, commits_done{0};
   int fail_on_patch = -1;
   int describe_max_us = 3000;
@@ -249,6 +255,8 @@ TEST_P(FlowGraphTest, KeepsOrderBatchesAndBackPressureAndFlushesAtTheEnd) {
   EXPECT_EQ(report.out_of_order, 0) << "the report saw frames out of order";
   EXPECT_EQ(patches.out_of_order, 0) << "commits out of finalization order";
   EXPECT_EQ(report.overlaps, 0) << "two threads in the report at once";
+  // Half the threads describe (at least one); the frame path keeps the other half.
+  EXPECT_LE(patches.max_describing, std::max(1, GetParam() / 2));
   // The source may hold one frame it read and the limiter has not admitted yet.
   EXPECT_LE(frames.max_in_flight, kInFlight + 1);
   EXPECT_EQ(frames.in_flight, 0);
@@ -281,6 +289,19 @@ TEST_P(FlowGraphTest, KeepsOrderBatchesAndBackPressureAndFlushesAtTheEnd) {
   EXPECT_EQ(frames.track_nice, nice);
   EXPECT_EQ(patches.describe_nice, std::min(19, nice + 5));
   EXPECT_EQ(patches.commit_nice, std::min(19, nice + 5));
+}
+
+TEST(FlowGraph, DescribesOnAsManyThreadsAsAskedFor) {
+  FakeFrames frames;
+  FakePatches patches;
+  patches.describe_max_us = 20'000;  // long enough for the patches to queue
+  FakeReport report(frames);
+  GraphOptions options{2, kInFlight, 0};
+  options.describing_threads = 3;
+  EXPECT_EQ(runGraph(frames, patches, report, options), static_cast<std::size_t>(kStreamFrames));
+  EXPECT_EQ(patches.commit_order, frames.finalization_order);
+  EXPECT_LE(patches.max_describing, 3);
+  EXPECT_GE(patches.max_describing, 2) << "the queued patches were described one at a time";
 }
 
 TEST(FlowGraph, AFailureToDescribeAPatchEndsTheRunWithItsError) {

@@ -80,6 +80,9 @@ struct GraphOptions {
   int max_patches_waiting = 4;
   // > 0: the bound is instead the waiting patches' colour samples, in bytes (live sources).
   std::size_t max_patch_bytes_waiting = 0;
+  // Threads that describe finalized patches; 0: half of `threads`, at least 1. The frame path
+  // keeps the other half busy, and more describers than free cores only take turns with it.
+  int describing_threads = 0;
 };
 
 // Runs the stages over the whole stream, then finishes the patches (end of stream) and waits

@@ -30,6 +30,10 @@ struct PipelineConfig {
   // short, the frame path runs first and texturing waits for a free core; 0: not at all.
   int texture_nice_live = 10;
   int texture_nice_replay = 0;
+  // Threads that build and describe the finalized patches' textures; 0: half of the run's
+  // threads (--threads), at least 1. On 2 cores a second describer only took turns with the
+  // frame path: 16 % more CPU a frame on the loop ring, no earlier commits.
+  int describing_threads = 0;
   // Finalized patches waiting for their textures, at most: at the bound a replay's source
   // waits and a live device drops frames, so that a backlog cannot grow the memory without end.
   int max_patches_waiting = 4;
