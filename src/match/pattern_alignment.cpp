@@ -32,20 +32,26 @@ core::Similarity2 nearestSimilarity(const Eigen::Matrix2d& A, double& error) {
   return {a, b, 0.0, 0.0};
 }
 
-// Bilinear colour of a tile that repeats along both axes, at tile pixel (x, y).
+// A whole number of texels n wrapped into [0, size).
+int wrapTexel(double n, int size) {
+  const auto i = static_cast<int>(static_cast<long long>(n) % size);
+  return i < 0 ? i + size : i;
+}
+
+// Bilinear colour of a tile that repeats along both axes, at tile pixel (x, y). The cost
+// function calls it for every sample at every phase tried: the four neighbours are wrapped
+// with one integer division per axis.
 Eigen::Vector3f sampleWrapped(const cv::Mat& tile, double x, double y) {
   const double fx = std::floor(x), fy = std::floor(y);
   const float ax = static_cast<float>(x - fx), ay = static_cast<float>(y - fy);
-  const auto at = [&](double u, double v) {
-    int i = static_cast<int>(std::fmod(u, tile.cols)),
-        j = static_cast<int>(std::fmod(v, tile.rows));
-    i += i < 0 ? tile.cols : 0;
-    j += j < 0 ? tile.rows : 0;
+  const int i0 = wrapTexel(fx, tile.cols), j0 = wrapTexel(fy, tile.rows);
+  const int i1 = i0 + 1 == tile.cols ? 0 : i0 + 1, j1 = j0 + 1 == tile.rows ? 0 : j0 + 1;
+  const auto at = [&](int i, int j) {
     const cv::Vec3b& c = tile.at<cv::Vec3b>(j, i);
     return Eigen::Vector3f(c[0], c[1], c[2]);
   };
-  return (1 - ay) * ((1 - ax) * at(fx, fy) + ax * at(fx + 1, fy)) +
-         ay * ((1 - ax) * at(fx, fy + 1) + ax * at(fx + 1, fy + 1));
+  return (1 - ay) * ((1 - ax) * at(i0, j0) + ax * at(i1, j0)) +
+         ay * ((1 - ax) * at(i0, j1) + ax * at(i1, j1));
 }
 
 // Points of the new pattern (texel coordinates) with their colours: tile pixel (i, j) is the

@@ -40,6 +40,7 @@ ColourSamples& ColourSamples::operator=(const ColourSamples& other) {
   views_per_tile_ = other.views_per_tile_;
   tiles_ = other.tiles_;
   size_ = other.size_;
+  layers_ = other.layers_;
   crowded_ = other.crowded_;
   last_tile_ = nullptr;  // it pointed into the other object's tiles
   return *this;
@@ -51,11 +52,13 @@ ColourSamples& ColourSamples::operator=(ColourSamples&& other) noexcept {
   views_per_tile_ = other.views_per_tile_;
   tiles_ = std::move(other.tiles_);
   size_ = other.size_;
+  layers_ = other.layers_;
   crowded_ = std::move(other.crowded_);
   last_tile_ = nullptr;
   other.tiles_.clear();
   other.crowded_.clear();
   other.size_ = 0;
+  other.layers_ = 0;
   other.last_tile_ = nullptr;
   return *this;
 }
@@ -80,6 +83,7 @@ ColourSamples::Layer& ColourSamples::layerOf(Tile& tile, std::int64_t key, std::
     if (it->view == view) return *it;
   }
   Layer& layer = tile.emplace_back();
+  ++layers_;
   layer.view = view;
   layer.cells.resize(static_cast<std::size_t>(kTileCells * kTileCells));
   if (views_per_tile_ > 0 && tile.size() == static_cast<std::size_t>(views_per_tile_) + 1) {
@@ -97,6 +101,7 @@ void ColourSamples::settle() {
                            [](const Layer& a, const Layer& b) { return a.weight < b.weight; });
       size_ -= lightest->filled;
       tile.erase(lightest);
+      --layers_;
     }
   }
   crowded_.clear();
@@ -173,9 +178,7 @@ std::optional<Eigen::Vector3f> ColourSamples::colourAt(float u, float v) const {
 }
 
 std::size_t ColourSamples::bytes() const {
-  std::size_t layers = 0;
-  for (const auto& entry : tiles_) layers += entry.second.size();
-  return layers * static_cast<std::size_t>(kTileCells * kTileCells) * sizeof(Cell);
+  return layers_ * static_cast<std::size_t>(kTileCells * kTileCells) * sizeof(Cell);
 }
 
 std::vector<ColourSample> ColourSamples::all() const {
@@ -279,6 +282,7 @@ ColourSamples ColourSamples::load(const std::filesystem::path& path) {
     Tile& tile = samples.tiles_[key];
     for (std::uint64_t l = 0; l < layers; ++l) {
       Layer& layer = tile.emplace_back();
+      ++samples.layers_;
       std::uint64_t filled = 0;
       layer.cells.resize(static_cast<std::size_t>(kTileCells * kTileCells));
       in.read(reinterpret_cast<char*>(&layer.view), sizeof layer.view);

@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include "support/synthetic_plane.h"
+#include "support/test_data.h"
 #include "tessera/planes/colour_samples.h"
 #include "tessera/planes/exposure.h"
 #include "tessera/planes/patch_map.h"
@@ -30,6 +31,28 @@ TEST(ColourSamples, ACellBlendsItsSamplesByWeightAtTheirWeightedMeanPosition) {
   EXPECT_FALSE(samples.colourAt(-0.001F, 0.001F).has_value());
   // 32 x 32 cells of 12 bytes are allocated as a tile is touched.
   EXPECT_EQ(samples.bytes(), 32u * 32u * 12u);
+}
+
+// bytes() counts the layers as they come and go: views kept apart, the lightest dropped, the
+// samples copied, moved, and saved and read back.
+TEST(ColourSamples, BytesFollowTheLayersThroughSettlingCopiesAndFiles) {
+  constexpr std::size_t kLayerBytes = 32u * 32u * 12u;
+  ColourSamples samples(0.01, 2);  // two views kept per tile
+  for (std::int32_t view = 0; view < 3; ++view) {
+    samples.add(0.005F, 0.005F, {10, 20, 30}, 1.0F + static_cast<float>(view), view);
+    samples.add(0.5F, 0.005F, {10, 20, 30}, 1.0F, view);  // a second tile
+  }
+  EXPECT_EQ(samples.bytes(), 6 * kLayerBytes);
+  samples.settle();  // each tile keeps its two heaviest views
+  EXPECT_EQ(samples.bytes(), 4 * kLayerBytes);
+  const ColourSamples copy = samples;
+  EXPECT_EQ(copy.bytes(), 4 * kLayerBytes);
+  ColourSamples moved = std::move(samples);
+  EXPECT_EQ(moved.bytes(), 4 * kLayerBytes);
+  EXPECT_EQ(samples.bytes(), 0u);  // NOLINT(bugprone-use-after-move): moved-from is empty
+  const std::filesystem::path file = test::freshTempDir() / "samples.bin";
+  moved.save(file);
+  EXPECT_EQ(ColourSamples::load(file).bytes(), 4 * kLayerBytes);
 }
 
 // The per-pixel path locates cells ahead of blending them; each cell must end as add() one by

@@ -103,6 +103,7 @@ class ColourSamples {
   int views_per_tile_ = 0;
   std::unordered_map<std::int64_t, Tile> tiles_;
   std::size_t size_ = 0;
+  std::size_t layers_ = 0;  // over all tiles: bytes() is read every frame for every patch
   std::vector<std::int64_t> crowded_;  // tiles holding more than views_per_tile_ layers
   // Neighbouring pixels mostly land in the same tile: remember the last one looked up
   // (unordered_map elements keep their address when the map grows).
