@@ -25,14 +25,10 @@ double heapInUseMb() {
 
 void returnFreedMemory() { malloc_trim(0); }
 
-namespace {
-
 bool userSetMallocTunables() {
   const char* tunables = std::getenv("GLIBC_TUNABLES");
   return tunables != nullptr && std::strstr(tunables, "glibc.malloc.") != nullptr;
 }
-
-}  // namespace
 
 void keepFreedMemoryForReuse(int arenas) {
   if (userSetMallocTunables()) return;

@@ -4,7 +4,6 @@
 // Sanitizer builds replace malloc, so there these figures mean nothing and the tests skip.
 #include <malloc.h>
 
-#include <cstdlib>
 #include <cstring>
 #include <memory>
 #include <vector>
@@ -74,8 +73,7 @@ std::vector<std::unique_ptr<char[]>> megabytes(int count) {
 
 TEST(Memory, AfterTheFramesFreedMemoryGoesBackAsItIsFreed) {
   if (kSanitized) GTEST_SKIP() << "a sanitizer's allocator keeps its own figures";
-  const char* tunables = std::getenv("GLIBC_TUNABLES");
-  if (tunables != nullptr && std::strstr(tunables, "glibc.malloc.") != nullptr) {
+  if (userSetMallocTunables()) {
     GTEST_SKIP() << "GLIBC_TUNABLES sets malloc tunables, which tessera leaves alone";
   }
   keepFreedMemoryForReuse(2);

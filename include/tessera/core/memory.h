@@ -25,6 +25,9 @@ void returnFreedMemory();
 // (mallopt is safe with other threads running; threads that already have an arena keep it).
 // Skipped when GLIBC_TUNABLES sets malloc tunables: the user's choice stands.
 void keepFreedMemoryForReuse(int arenas);
+// Whether GLIBC_TUNABLES sets any glibc.malloc tunable (then the functions here leave glibc's
+// settings as the user made them).
+bool userSetMallocTunables();
 // Once the frames are over: free space at a heap's top above 16 MB is handed back at the next
 // large free, and what every arena holds now is returned. The threads' own arenas (64 MB each)
 // never trim their tops under keepFreedMemoryForReuse's 128 MB, and malloc_trim leaves those
