@@ -234,7 +234,7 @@ void writePatchesJson(const PatchMap& map, const std::filesystem::path& path,
                        {"u_axis", vectorJson(frame.u_axis)},
                        {"v_axis", vectorJson(frame.v_axis)},
                        {"area_m2", outline.area_m2},
-                       {"colour_samples", patch.samples.size()},
+                       {"colour_samples", patch.samples->size()},
                        {"outline", parts},
                        {"texture", texture_json},
                        {"instance", instance_json}});

@@ -100,7 +100,7 @@ class PatchBacklog {
   void queued(const std::vector<JobMessage>& jobs) {
     const std::lock_guard lock(mutex_);
     for (const JobMessage& job : jobs) {
-      const std::size_t bytes = job->patch.samples.size() * sizeof(planes::ColourSample);
+      const std::size_t bytes = planes::sampleCount(job->patch) * sizeof(planes::ColourSample);
       waiting_.push_back(bytes);
       waiting_bytes_ += bytes;
     }

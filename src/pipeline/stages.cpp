@@ -367,7 +367,7 @@ std::optional<Eigen::Vector3f> PlaneStage::sampleColours(
     constexpr std::size_t kFewSamples = 2000;
     for (int& id : ids) {
       const planes::Patch* patch = map_.find(id);
-      if (patch == nullptr || patch->samples.size() >= kFewSamples) id = -1;
+      if (patch == nullptr || patch->samples->size() >= kFewSamples) id = -1;
     }
   }
   return map_.addColours(frame, detection, T_W_C, ids, sharpness_.measure(frame.rgb), T_W_C_colour);
@@ -465,7 +465,7 @@ FusedFrame PlaneStage::process(FusedFrame fused) {
 PlaneFigures PlaneStage::figures() const {
   PlaneFigures figures = figures_;
   figures.patches_finalized = map_.finalizedCount();
-  for (const planes::Patch& patch : map_.patches()) figures.colour_samples += patch.samples.size();
+  for (const planes::Patch& patch : map_.patches()) figures.colour_samples += patch.samples->size();
   figures.colour_sample_bytes = colourSampleBytes();
   figures.samples_released = map_.samplesReleased();
   return figures;
@@ -508,7 +508,7 @@ std::vector<planes::PatchSnapshot> PlaneStage::snapshotsOf(
 
 std::size_t PlaneStage::colourSampleBytes() const {
   std::size_t bytes = 0;
-  for (const planes::Patch& patch : map_.patches()) bytes += patch.samples.bytes();
+  for (const planes::Patch& patch : map_.patches()) bytes += patch.samples->bytes();
   return bytes;
 }
 

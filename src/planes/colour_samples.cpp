@@ -1,6 +1,7 @@
 #include "tessera/planes/colour_samples.h"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <fstream>
 
@@ -296,6 +297,17 @@ ColourSamples ColourSamples::load(const std::filesystem::path& path) {
   }
   samples.size_ = size;
   return samples;
+}
+
+ColourSamples& SharedColourSamples::edit() {
+  if (samples_.use_count() > 1) {
+    samples_ = std::make_shared<ColourSamples>(*samples_);
+  } else {
+    // The last other holder let go: its reads happen before our writes (the count's release
+    // decrement, read here, is paired with this fence).
+    std::atomic_thread_fence(std::memory_order_acquire);
+  }
+  return *samples_;
 }
 
 }  // namespace tessera::planes

@@ -298,7 +298,7 @@ std::optional<Eigen::Vector3f> PatchMap::addColours(
         if (sees[x] == 0 || !smooth(frame.rgb, x, y)) continue;
         const TileTarget* tile = targets[label[column[x]]].tileAt(pixel[x].u, pixel[x].v);
         if (tile == nullptr) continue;
-        const auto held = tile->patch->samples.colourAt(pixel[x].u, pixel[x].v);
+        const auto held = tile->patch->samples->colourAt(pixel[x].u, pixel[x].v);
         if (held) pairs.push_back({Eigen::Vector3f(rgb[x][0], rgb[x][1], rgb[x][2]), *held});
       }
     }
@@ -333,7 +333,7 @@ std::optional<Eigen::Vector3f> PatchMap::addColours(
       next.colour[static_cast<std::size_t>(c)] =
           cv::saturate_cast<std::uint8_t>(gain[c] * static_cast<float>(rgb[c]));
     }
-    next.samples = &tile->patch->samples;
+    next.samples = &tile->patch->samples.edit();
     next.slot = next.samples->locate(pixel.u, pixel.v, view);
     next.weight = pixel.weight * frame_weight;
     ++tile->pixels;
@@ -369,7 +369,7 @@ std::optional<Eigen::Vector3f> PatchMap::addColours(
     for (TileTarget& tile : target.tiles) {
       if (tile.pixels == 0) continue;
       Patch& patch = *tile.patch;
-      patch.samples.settle();
+      patch.samples.edit().settle();
       patch.footprint_sum_m += tile.distance_sum / k.fx;
       patch.footprint_pixels += tile.pixels;
       patch.log_gain_sum += static_cast<double>(tile.pixels) * log_gain;

@@ -64,13 +64,13 @@ std::size_t PatchMap::releaseIdleSamples(long frame_index) {
   if (!spill_dir_ || config_.release_samples_after_frames <= 0 || spill_failed_) return 0;
   std::size_t released = 0;
   for (auto& [id, patch] : patches_) {
-    if (!patch.finalized || patch.spilled_samples || patch.samples.size() == 0 ||
+    if (!patch.finalized || patch.spilled_samples || patch.samples->size() == 0 ||
         frame_index - patch.last_seen_frame < config_.release_samples_after_frames) {
       continue;
     }
     const std::filesystem::path path = *spill_dir_ / fmt::format("patch_{}.samples", patch.id);
     try {
-      patch.samples.save(path);
+      patch.samples->save(path);
     } catch (const core::Error& e) {
       spdlog::warn("{}; colour samples stay in memory from now on", e.what());
       spill_failed_ = true;

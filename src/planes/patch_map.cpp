@@ -175,18 +175,18 @@ std::set<int> PatchMap::mergePlane(int into_id, int from_id, std::vector<int>& i
       if (!tile.spilled_samples) tiles[key] = &tile;
     }
     const PlaneGeometry& was = *gone.geometry;
-    for (ColourSample sample : gone.samples.all()) {
+    for (ColourSample sample : gone.samples->all()) {
       const Eigen::Vector3d X = was.origin + sample.u * was.u_axis + sample.v * was.v_axis;
       sample.u = static_cast<float>((X - frame.origin).dot(frame.u_axis));
       sample.v = static_cast<float>((X - frame.origin).dot(frame.v_axis));
       const Cell cell{static_cast<int>(std::floor(sample.u / config_.cell_m)),
                       static_cast<int>(std::floor(sample.v / config_.cell_m))};
       if (const auto it = tiles.find(grid.keyOf(cell)); it != tiles.end()) {
-        it->second->samples.add(sample);
+        it->second->samples.edit().add(sample);
         took.insert(it->second->id);
       }
     }
-    for (const auto& entry : tiles) entry.second->samples.settle();
+    for (const auto& entry : tiles) entry.second->samples.edit().settle();
     // Cells placed in other tiles than the one that took most.
     for (const Cell& cell : cells) {
       if (const auto it = tiles.find(grid.keyOf(cell)); it != tiles.end()) {
@@ -264,24 +264,37 @@ PatchSnapshot PatchMap::snapshot(const Patch& patch) const {
   snapshot.offset = patch.offset();
   snapshot.frame = patch.planeFrame();
   snapshot.outline = outlineOf(patch);
-  snapshot.samples = patch.samples.all();
+  snapshot.shared_samples = patch.samples.share();
   if (patch.footprint_pixels > 0 && !patch.log_gain_sum.isZero()) {
     // Samples were compensated to the first frame's exposure; the mean exposure of the frames
     // that coloured the patch fits its views best.
-    const Eigen::Vector3d back =
+    snapshot.colour_scale =
         (-patch.log_gain_sum / static_cast<double>(patch.footprint_pixels)).array().exp();
-    for (ColourSample& sample : snapshot.samples) {
-      for (int c = 0; c < 3; ++c) {
-        const auto i = static_cast<std::size_t>(c);
-        sample.rgb[i] = cv::saturate_cast<std::uint8_t>(back[c] * sample.rgb[i]);
-      }
-    }
   }
   if (patch.footprint_pixels > 0) {
     snapshot.pixel_footprint_m =
         patch.footprint_sum_m / static_cast<double>(patch.footprint_pixels);
   }
   return snapshot;
+}
+
+std::vector<ColourSample> sampleList(const PatchSnapshot& patch) {
+  if (!patch.shared_samples) return patch.samples;
+  std::vector<ColourSample> samples = patch.shared_samples->all();
+  if (patch.colour_scale) {
+    const Eigen::Vector3d& scale = *patch.colour_scale;
+    for (ColourSample& sample : samples) {
+      for (int c = 0; c < 3; ++c) {
+        const auto i = static_cast<std::size_t>(c);
+        sample.rgb[i] = cv::saturate_cast<std::uint8_t>(scale[c] * sample.rgb[i]);
+      }
+    }
+  }
+  return samples;
+}
+
+std::size_t sampleCount(const PatchSnapshot& patch) {
+  return patch.shared_samples ? patch.shared_samples->size() : patch.samples.size();
 }
 
 const Patch* PatchMap::find(int id) const {

@@ -120,7 +120,7 @@ void PatchMap::saveState(const std::filesystem::path& file,
     if (patch.spilled_samples) {
       core::linkOrCopy(*patch.spilled_samples, samplesFile(samples_dir, patch.id));
     } else {
-      patch.samples.save(samplesFile(samples_dir, patch.id));
+      patch.samples->save(samplesFile(samples_dir, patch.id));
     }
   }
   out.finish();

@@ -174,13 +174,21 @@ double texelSizeFor(const planes::PatchSnapshot& patch, const BitmapConfig& conf
 PatchBitmap buildBitmap(const planes::PatchSnapshot& patch, const BitmapConfig& config) {
   const auto start = std::chrono::steady_clock::now();
   PatchBitmap bitmap = emptyBitmap(patch, config);
-  const bool views_apart = std::any_of(patch.samples.begin(), patch.samples.end(),
+  // Samples the map shares are listed now, on this thread; a given list is read where it is.
+  std::vector<ColourSample> listed;
+  if (patch.shared_samples) listed = planes::sampleList(patch);
+  const std::vector<ColourSample>& given = patch.shared_samples ? listed : patch.samples;
+  const bool views_apart = std::any_of(given.begin(), given.end(),
                                        [](const ColourSample& s) { return s.view >= 0; });
-  // Views kept apart are aligned to each other, which moves their samples: a copy. Blended
-  // samples (the default) have no views to align and are read where they are.
+  // Views kept apart are aligned to each other, which moves their samples: a copy of a given
+  // list. Blended samples (the default) have no views to align and are read where they are.
   std::vector<ColourSample> aligned;
   if (views_apart) {
-    aligned = patch.samples;
+    if (patch.shared_samples) {
+      aligned = std::move(listed);
+    } else {
+      aligned = patch.samples;
+    }
     const std::vector<ViewShift> shifts = alignViews(aligned, bitmap.grid, config.alignment);
     for (const ViewShift& shift : shifts) {
       const double mm = 1000.0 * bitmap.grid.texel_m * std::hypot(shift.dx, shift.dy);
@@ -189,7 +197,7 @@ PatchBitmap buildBitmap(const planes::PatchSnapshot& patch, const BitmapConfig& 
     }
     bitmap.views_moved = static_cast<int>(shifts.size());
   }
-  const std::vector<ColourSample>& samples = views_apart ? aligned : patch.samples;
+  const std::vector<ColourSample>& samples = views_apart ? aligned : given;
   if (config.views.enabled && views_apart) {
     const ViewComposite composite = composeByViews(samples, bitmap.grid, config.views,
                                                    config.radius_texels, config.sigma_texels);
@@ -229,7 +237,7 @@ PatchBitmap buildBitmap(const planes::PatchSnapshot& patch, const BitmapConfig& 
 
 PatchBitmap buildBitmapBruteForce(const planes::PatchSnapshot& patch, const BitmapConfig& config) {
   PatchBitmap bitmap = emptyBitmap(patch, config);
-  const std::vector<ColourSample>& samples = patch.samples;
+  const std::vector<ColourSample> samples = planes::sampleList(patch);
   const double t = bitmap.grid.texel_m;
   const double radius2 = std::pow(config.radius_texels * t, 2);
   const double two_sigma2 = 2.0 * std::pow(config.sigma_texels * t, 2);

@@ -190,7 +190,7 @@ TEST(PatchColours, PixelsOfAnOccluderNeverReachThePatchBehindIt) {
   map.addColours(occluded, everything_wall, T_W_C, ids);
 
   const Patch& patch = map.patches().front();
-  const std::vector<ColourSample> samples = patch.samples.all();
+  const std::vector<ColourSample> samples = patch.samples->all();
   ASSERT_GT(samples.size(), 10000u);
   for (const ColourSample& sample : samples) {
     ASSERT_EQ(sample.rgb, (std::array<std::uint8_t, 3>{200, 200, 200}))
@@ -201,6 +201,44 @@ TEST(PatchColours, PixelsOfAnOccluderNeverReachThePatchBehindIt) {
   cv::Mat red;
   cv::inRange(bitmap.image, cv::Scalar(230, 0, 0), cv::Scalar(255, 180, 180), red);
   EXPECT_EQ(cv::countNonZero(red), 0);
+}
+
+// A snapshot shares the patch's samples instead of copying them; colours the patch takes
+// afterwards go to a copy the patch makes then, so the snapshot lists what it was taken with.
+// With no snapshot left holding them, the patch changes its samples in place.
+TEST(PatchColours, ASnapshotKeepsItsSamplesWhileThePatchTakesMoreColour) {
+  const core::Isometry T_W_C = core::Isometry::Identity();
+  core::Frame frame =
+      test::renderPlane(test::kinectIntrinsics(), T_W_C, Eigen::Vector3d(0, 0, -1), -2.0);
+  frame.rgb.setTo(cv::Scalar(200, 200, 200));
+  const PlaneDetector detector(PlaneDetectorConfig{});
+  const PlaneDetection detection = detector.detect(frame);
+  ASSERT_EQ(detection.planes.size(), 1u);
+  PatchMap map(PatchMapConfig{});
+  const std::vector<int> ids = map.add(observationsOf(frame, detection, T_W_C));
+  map.addColours(frame, detection, T_W_C, ids);
+  const Patch& patch = map.patches().front();
+  PatchSnapshot snapshot = map.snapshot(patch);
+  ASSERT_EQ(snapshot.shared_samples.get(), &*patch.samples);  // shared, not copied
+  const std::size_t taken = sampleCount(snapshot);
+  ASSERT_GT(taken, 10000u);
+
+  frame.rgb.setTo(cv::Scalar(100, 100, 100));
+  map.addColours(frame, detection, T_W_C, ids);
+  EXPECT_NE(snapshot.shared_samples.get(), &*patch.samples);
+  const std::vector<ColourSample> listed = sampleList(snapshot);
+  ASSERT_EQ(listed.size(), taken);
+  for (const ColourSample& sample : listed) {
+    ASSERT_EQ(sample.rgb, (std::array<std::uint8_t, 3>{200, 200, 200}));
+  }
+  const std::vector<ColourSample> now = patch.samples->all();
+  ASSERT_FALSE(now.empty());
+  EXPECT_NEAR(now.front().rgb[0], 150, 2);  // both frames, blended
+
+  snapshot = {};
+  const ColourSamples* own = &*patch.samples;
+  map.addColours(frame, detection, T_W_C, ids);
+  EXPECT_EQ(&*patch.samples, own);
 }
 
 // The colour image taken 2 cm to the right of where the depth image was (an unsynchronised
@@ -224,7 +262,7 @@ TEST(PatchColours, ColourTakenAtAnotherPoseIsPlacedWithThatPose) {
     const Patch& patch = map.patches().front();
     const Patch::Frame plane = patch.planeFrame();
     std::size_t wrong = 0, total = 0;
-    for (const ColourSample& s : patch.samples.all()) {
+    for (const ColourSample& s : patch.samples->all()) {
       const Eigen::Vector3d X = plane.origin + s.u * plane.u_axis + s.v * plane.v_axis;
       const long squares = static_cast<long>(std::floor(X.x() * 10)) +
                            static_cast<long>(std::floor(X.y() * 10)) +
@@ -267,12 +305,12 @@ TEST(PatchColours, APlaneNearTheRegionsOwnIsColouredWhereTheDepthConfirmsIt) {
     map.addColours(wall, wall_detection, T_W_C, wall_ids);
     const Patch& own = *std::find_if(map.patches().begin(), map.patches().end(),
                                      [&](const Patch& p) { return p.id == wall_ids.front(); });
-    EXPECT_GT(own.samples.all().size(), 10000u);
+    EXPECT_GT(own.samples->all().size(), 10000u);
     std::vector<ColourSample> on_tilted;
     for (const Patch& patch : map.patches()) {
       if (patch.id == wall_ids.front()) continue;
       const Patch::Frame plane = patch.planeFrame();
-      for (const ColourSample& s : patch.samples.all()) {
+      for (const ColourSample& s : patch.samples->all()) {
         on_tilted.push_back(s);
         // Near the crossing: the wall is within the colour depth tolerance (1 cm + 0.005 z^2,
         // 3 cm at 2 m) of the tilted plane only for |x| up to 3 cm / tan 8 degrees, 21 cm.

@@ -73,7 +73,7 @@ TEST(PatchCorrection, ADoubledWallMergesIntoOnePatchAfterTheLoopCloses) {
   ASSERT_EQ(map.patches().size(), 2u) << "the drifted view should double the wall";
   ASSERT_EQ(countOf(events, PatchEvent::Kind::kFinalized), 2u);
   const int first = map.patches()[0].id, doubled = map.patches()[1].id;
-  const std::size_t first_samples = map.patches()[0].samples.size();
+  const std::size_t first_samples = map.patches()[0].samples->size();
   const double first_area = map.areaM2(map.patches()[0]);
 
   // The pose graph's answer: keyframes from time 5000 on were 10 cm too far along +z.
@@ -94,7 +94,7 @@ TEST(PatchCorrection, ADoubledWallMergesIntoOnePatchAfterTheLoopCloses) {
   EXPECT_EQ(wall.id, first);
   EXPECT_NEAR(std::abs(wall.offset()), 1.5, 0.003);
   EXPECT_GT(map.areaM2(wall), first_area + 0.3);  // 0.4 m more along x, over > 1 m of height
-  EXPECT_GT(wall.samples.size(), first_samples);
+  EXPECT_GT(wall.samples->size(), first_samples);
   EXPECT_FALSE(wall.finalized);
 
   events.clear();

@@ -341,7 +341,7 @@ TEST(PatchColours, SamplesFromAFrameMatchTheColourOnThePlane) {
   map.addColours(frame, detection, T_W_C, ids);
   ASSERT_EQ(map.patches().size(), 1u);
   const Patch& patch = map.patches().front();
-  const auto samples = patch.samples.all();
+  const auto samples = patch.samples->all();
   ASSERT_GT(samples.size(), 100000u);
   // 3.5 mm cells over the patch's area, one sample each, bound the count and the memory.
   const double cell = PatchMapConfig{}.sample_cell_m;
@@ -389,7 +389,7 @@ TEST(PatchLifecycle, AFinalizedPatchOutOfViewReleasesItsSamplesAndGetsThemBackWh
   const auto spill = test::freshTempDir() / "samples";
   const ColouredPlane plane = addColouredPlane(map, spill);
   ASSERT_EQ(map.patches().size(), 1u);
-  const std::vector<ColourSample> before = map.patches().front().samples.all();
+  const std::vector<ColourSample> before = map.patches().front().samples->all();
   ASSERT_GT(before.size(), 100000u);
   long f = 0;
   for (; f < 15; ++f) EXPECT_EQ(map.releaseIdleSamples(f), 0u);  // not finalized yet
@@ -399,8 +399,8 @@ TEST(PatchLifecycle, AFinalizedPatchOutOfViewReleasesItsSamplesAndGetsThemBackWh
   EXPECT_EQ(map.releaseIdleSamples(19), 0u);  // unseen for 19 frames only
   EXPECT_EQ(map.releaseIdleSamples(20), 1u);
   const Patch& released = map.patches().front();
-  EXPECT_EQ(released.samples.size(), 0u);
-  EXPECT_EQ(released.samples.bytes(), 0u);
+  EXPECT_EQ(released.samples->size(), 0u);
+  EXPECT_EQ(released.samples->bytes(), 0u);
   ASSERT_TRUE(released.spilled_samples);
   EXPECT_TRUE(std::filesystem::is_regular_file(*released.spilled_samples));
   EXPECT_EQ(map.releaseIdleSamples(40), 0u);  // released once
@@ -408,7 +408,7 @@ TEST(PatchLifecycle, AFinalizedPatchOutOfViewReleasesItsSamplesAndGetsThemBackWh
   map.add(observationsOf(plane.frame, plane.detection, core::Isometry::Identity()));  // again
   const Patch& back = map.patches().front();
   EXPECT_FALSE(back.spilled_samples);
-  const std::vector<ColourSample> after = back.samples.all();
+  const std::vector<ColourSample> after = back.samples->all();
   ASSERT_EQ(after.size(), before.size());
   const auto key = [](const ColourSample& s) { return std::tuple(s.u, s.v, s.rgb, s.score); };
   std::vector<std::tuple<float, float, std::array<std::uint8_t, 3>, float>> a, b;
@@ -433,7 +433,7 @@ TEST(PatchLifecycle, SamplesStayInMemoryWhenTheirFileCannotBeWritten) {
   for (long f = 0; f <= 15; ++f) map.endFrame(f);
   ASSERT_TRUE(map.patches().front().finalized);
   EXPECT_EQ(map.releaseIdleSamples(30), 0u);
-  EXPECT_GT(map.patches().front().samples.size(), 100000u);
+  EXPECT_GT(map.patches().front().samples->size(), 100000u);
   EXPECT_FALSE(map.patches().front().spilled_samples);
 }
 
@@ -505,7 +505,7 @@ TEST(PatchTiles, ColoursGoToTheTileWhereThePixelMeetsThePlane) {
   const int cells_per_tile = static_cast<int>(std::lround(0.5 / cut_config.cell_m));
   for (const Patch& tile : cut.patches()) {
     const CellBounds b = boundsOf(tile);
-    for (const ColourSample& s : tile.samples.all()) {
+    for (const ColourSample& s : tile.samples->all()) {
       // Within the tile's window of cells (its cells' bounds, grown to a whole tile).
       const int cu = static_cast<int>(std::floor(s.u / cut_config.cell_m));
       const int cv = static_cast<int>(std::floor(s.v / cut_config.cell_m));
@@ -514,9 +514,9 @@ TEST(PatchTiles, ColoursGoToTheTileWhereThePixelMeetsThePlane) {
       EXPECT_GT(cv, b.max_v - cells_per_tile);
       EXPECT_LT(cv, b.min_v + cells_per_tile);
     }
-    samples += tile.samples.size();
+    samples += tile.samples->size();
   }
-  const double expected = static_cast<double>(whole.patches().front().samples.size());
+  const double expected = static_cast<double>(whole.patches().front().samples->size());
   EXPECT_NEAR(static_cast<double>(samples), expected, 0.01 * expected);
 }
 
@@ -555,7 +555,7 @@ DriveMemory driveAlongAFloor(PatchMapConfig config, const std::filesystem::path&
     }
     map.releaseIdleSamples(frame);
     std::size_t bytes = 0;
-    for (const Patch& patch : map.patches()) bytes += patch.samples.bytes();
+    for (const Patch& patch : map.patches()) bytes += patch.samples->bytes();
     std::size_t& peak = frame < kFrames / 2 ? memory.peak_first_half : memory.peak_second_half;
     peak = std::max(peak, bytes);
     memory.at_end = bytes;

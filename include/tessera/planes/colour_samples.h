@@ -10,6 +10,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <limits>
+#include <memory>
 #include <optional>
 #include <unordered_map>
 #include <utility>
@@ -109,6 +110,30 @@ class ColourSamples {
   // (unordered_map elements keep their address when the map grows).
   std::int64_t last_key_ = 0;
   Tile* last_tile_ = nullptr;
+};
+
+// A patch's samples, shared with the copies of the patch that are textured on other threads
+// (PatchSnapshot) rather than copied for them: a finalization burst would otherwise hold every
+// finalized patch's samples twice. The copies only read; the patch clones the samples before
+// it changes them while a copy still holds them (copy on write). One thread owns the holder.
+class SharedColourSamples {
+ public:
+  explicit SharedColourSamples(ColourSamples samples)
+      : samples_(std::make_shared<ColourSamples>(std::move(samples))) {}
+  SharedColourSamples& operator=(ColourSamples samples) {
+    samples_ = std::make_shared<ColourSamples>(std::move(samples));
+    return *this;
+  }
+
+  const ColourSamples& operator*() const { return *samples_; }
+  const ColourSamples* operator->() const { return samples_.get(); }
+  // The samples to change: cloned first while another holder reads them.
+  ColourSamples& edit();
+  // A read-only handle for another thread; the samples it sees never change.
+  std::shared_ptr<const ColourSamples> share() const { return samples_; }
+
+ private:
+  std::shared_ptr<ColourSamples> samples_;
 };
 
 }  // namespace tessera::planes

@@ -118,7 +118,9 @@ struct Patch {
   // The plane's geometry, as the plane keeps it (shared, read only here).
   std::shared_ptr<const PlaneGeometry> geometry = std::make_shared<const PlaneGeometry>();
   CellSet cells;
-  ColourSamples samples{PatchMapConfig{}.sample_cell_m};  // PatchMap sets its configured cell
+  // Shared with its snapshots while they are textured (SharedColourSamples::edit to change);
+  // PatchMap sets its configured cell.
+  SharedColourSamples samples{ColourSamples(PatchMapConfig{}.sample_cell_m)};
   // Sum over every coloured pixel of its footprint on the plane (distance / fx, metres), for
   // the texel size that matches how sharply the sensor saw the patch.
   double footprint_sum_m = 0.0;
@@ -200,9 +202,19 @@ struct PatchSnapshot {
   double offset = 0.0;
   Patch::Frame frame;
   Outline outline;
+  // The samples, either listed here or, as the map gives them, its cells shared (read only)
+  // and listed by sampleList on the thread that textures the patch, each colour times
+  // `colour_scale` (the exposure the map compensated to, undone).
   std::vector<ColourSample> samples;
+  std::shared_ptr<const ColourSamples> shared_samples;
+  std::optional<Eigen::Vector3d> colour_scale;
   double pixel_footprint_m = 0.0;  // mean footprint of the pixels that coloured it (0: none)
 };
+
+// The snapshot's samples as a list (PatchSnapshot::samples).
+std::vector<ColourSample> sampleList(const PatchSnapshot& patch);
+// How many samples sampleList gives, without listing them.
+std::size_t sampleCount(const PatchSnapshot& patch);
 
 // What changed for downstream stages: a patch (re)finalized as `version`, or a patch that was
 // finalized before and has since been merged into another (its id is gone).
