@@ -298,9 +298,9 @@ std::size_t runGraph(FramePath& frames, PatchPath& patches, RunReport& report,
     graph.wait_for_all();
 
     // End of stream: the patches still live are finalized and textured like the others. They
-    // are copied for texturing as the backlog allows, not all at once: each copy holds a
-    // patch's colour samples, and the end finalizes many patches (a long walk's process peak
-    // was these copies).
+    // are handed to texturing as the backlog allows, not all at once, so that its bound holds
+    // at the end too (the end finalizes many patches; a long walk's process peak was once
+    // these jobs, when each held a copy of its patch's colour samples).
     const std::vector<planes::PatchEvent> events = frames.finishStream();
     report.patchEvents(events);
     queue(jobs.retired(events), describe_node);

@@ -16,12 +16,14 @@ void readConfig(const core::ConfigSection& section, PipelineConfig& config) {
   section.read("max_patches_waiting", config.max_patches_waiting);
   section.read("live_patches_waiting_mb", config.live_patches_waiting_mb);
   section.read("return_freed_memory_s", config.return_freed_memory_s);
+  section.read("return_freed_memory_above_mb", config.return_freed_memory_above_mb);
   section.read("checkpoint_every_s", config.checkpoint_every_s);
-  if (!(config.return_freed_memory_s >= 0.0) || !(config.checkpoint_every_s >= 0.0) ||
-      !(config.live_shed_after_ms >= 0.0) || !(config.live_patches_waiting_mb >= 0.0)) {
+  if (!(config.return_freed_memory_s >= 0.0) || !(config.return_freed_memory_above_mb >= 0.0) ||
+      !(config.checkpoint_every_s >= 0.0) || !(config.live_shed_after_ms >= 0.0) ||
+      !(config.live_patches_waiting_mb >= 0.0)) {
     throw core::ConfigError(
-        "pipeline: return_freed_memory_s, checkpoint_every_s, live_shed_after_ms and "
-        "live_patches_waiting_mb must be 0 or more");
+        "pipeline: return_freed_memory_s, return_freed_memory_above_mb, checkpoint_every_s, "
+        "live_shed_after_ms and live_patches_waiting_mb must be 0 or more");
   }
   if (config.describing_threads < 0) {
     throw core::ConfigError("pipeline: describing_threads must be 0 (half the threads) or more");

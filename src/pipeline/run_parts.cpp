@@ -64,7 +64,8 @@ RunParts::RunParts(core::FrameSource& input, const RunConfig& config, const RunO
                                        config.pipeline.checkpoint_every_s, planes, bitmaps, commit)
                                  : nullptr),
       stages(source_stage, tracking, integration, planes, describe, commit, bitmaps, sink,
-             loop_closer.get(), options.listener, config.pipeline.return_freed_memory_s,
+             loop_closer.get(), options.listener,
+             {config.pipeline.return_freed_memory_s, config.pipeline.return_freed_memory_above_mb},
              map_saver.get()) {
   planes.spillSamplesTo(sample_dir);
   if (loop_closer) tracking.followLoopClosure();

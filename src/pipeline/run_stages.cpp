@@ -46,7 +46,7 @@ FusedFrame RunStages::findPlanes(FusedFrame fused) {
 
 std::vector<planes::PatchEvent> RunStages::finishStream() {
   // The frames are over: what the end builds is freed for good, so it is handed back promptly.
-  if (return_freed_memory_s_ > 0.0) core::returnFreedMemorySooner();
+  if (freed_memory_return_.every_s > 0.0) core::returnFreedMemorySooner();
   if (loop_closer_ == nullptr) return planes_.finishStream();
   const auto start = std::chrono::steady_clock::now();
   loop_closer_->finish();
@@ -61,17 +61,29 @@ std::vector<planes::PatchSnapshot> RunStages::snapshots(const std::vector<int>& 
 
 void RunStages::frameDone(const FusedFrame& fused) {
   sink_.process(fused);
+  returnFreedMemoryAboveBudget();
   if (listener_ == nullptr || fused.frame.source_interrupted) return;
   if (const std::optional<core::Isometry> pose = mapPoseOf(fused)) {
     listener_->onPose(fused.frame.timestamp_ns, *pose);
   }
 }
 
+void RunStages::returnFreedMemoryAboveBudget() {
+  const double budget_mb = freed_memory_return_.above_mb;
+  if (budget_mb <= 0.0 || core::residentMb() <= budget_mb) return;
+  const SteadyTime now = std::chrono::steady_clock::now();
+  if (std::chrono::duration<double>(now - over_budget_returned_at_).count() < 1.0) return;
+  core::returnFreedMemory();
+  over_budget_returned_at_ = std::chrono::steady_clock::now();
+  spdlog::debug("resident memory above {:.0f} MB: returned freed memory in {:.1f} ms", budget_mb,
+                std::chrono::duration<double, std::milli>(over_budget_returned_at_ - now).count());
+}
+
 void RunStages::returnFreedMemory() {
-  if (return_freed_memory_s_ <= 0.0) return;
+  if (freed_memory_return_.every_s <= 0.0) return;
   const SteadyTime now = std::chrono::steady_clock::now();
   if (std::chrono::duration<double>(now - freed_memory_returned_at_).count() <
-      return_freed_memory_s_) {
+      freed_memory_return_.every_s) {
     return;
   }
   core::returnFreedMemory();

@@ -521,6 +521,8 @@ TEST(RunConfig, DefaultYamlDocumentsEveryKeyWithTheStructDefaults) {
   EXPECT_EQ(from_file.pipeline.max_patches_waiting, defaults.pipeline.max_patches_waiting);
   EXPECT_EQ(from_file.pipeline.live_patches_waiting_mb, defaults.pipeline.live_patches_waiting_mb);
   EXPECT_EQ(from_file.pipeline.return_freed_memory_s, defaults.pipeline.return_freed_memory_s);
+  EXPECT_EQ(from_file.pipeline.return_freed_memory_above_mb,
+            defaults.pipeline.return_freed_memory_above_mb);
   EXPECT_EQ(from_file.pipeline.describing_threads, defaults.pipeline.describing_threads);
   EXPECT_EQ(from_file.tsdf.voxel_size_m, defaults.tsdf.voxel_size_m);
   EXPECT_EQ(from_file.tsdf.truncation_m, defaults.tsdf.truncation_m);

@@ -46,6 +46,10 @@ struct PipelineConfig {
   // arenas that glibc does not give back by itself. Unless 0, the end of the frames also
   // returns what is held and lowers the trim threshold (core::returnFreedMemorySooner).
   double return_freed_memory_s = 10.0;
+  // Resident memory (MB) above which freed memory is also returned after each frame, at most
+  // once a second, on the frame path; 0: never. Bounds what glibc keeps between the returns
+  // above when finalizations come in bursts.
+  double return_freed_memory_above_mb = 900.0;
   // Seconds between checkpoints of OUT/map (the state `tessera run --continue` needs), written
   // on the frame path after the plane stage; a run killed outright loses at most this much of
   // its map. 0: the map is saved at the end only.

@@ -13,12 +13,19 @@ namespace tessera::pipeline::internal {
 
 class MapSaver;
 
+// When freed memory goes back to the kernel (PipelineConfig::return_freed_memory_s and
+// return_freed_memory_above_mb); 0 turns either off.
+struct FreedMemoryReturn {
+  double every_s = 0.0;   // after a commit, at most this often
+  double above_mb = 0.0;  // after a frame, while resident memory is above this (at most 1/s)
+};
+
 class RunStages : public FramePath, public PatchPath, public RunReport {
  public:
   RunStages(SourceStage& source, TrackingStage& tracking, IntegrationStage& integration,
             PlaneStage& planes, const DescribeStage& describe, CommitStage& commit,
             BitmapFiles& bitmaps, StatsSink& sink, loop::LoopCloser* loop_closer,
-            RunListener* listener, double return_freed_memory_s = 0.0,
+            RunListener* listener, FreedMemoryReturn freed_memory_return = {},
             MapSaver* map_saver = nullptr)
       : source_(source),
         tracking_(tracking),
@@ -30,7 +37,7 @@ class RunStages : public FramePath, public PatchPath, public RunReport {
         sink_(sink),
         loop_closer_(loop_closer),
         listener_(listener),
-        return_freed_memory_s_(return_freed_memory_s),
+        freed_memory_return_(freed_memory_return),
         map_saver_(map_saver) {}
 
   std::optional<core::Frame> next() override { return source_.next(); }
@@ -62,8 +69,11 @@ class RunStages : public FramePath, public PatchPath, public RunReport {
   // Passes on the keyframes loop closure found revisiting a kept one's place: neither the
   // tracker nor the saved map keeps them.
   void forgetCoveredKeyframes();
-  // On the committing thread, off the frame path, at most every return_freed_memory_s_.
+  // On the committing thread, off the frame path, at most every freed_memory_return_.every_s.
   void returnFreedMemory();
+  // On the frame path, while resident memory is above freed_memory_return_.above_mb: a burst
+  // of finalizations can fill the heap's free lists faster than the commits come.
+  void returnFreedMemoryAboveBudget();
 
   SourceStage& source_;
   TrackingStage& tracking_;
@@ -76,9 +86,10 @@ class RunStages : public FramePath, public PatchPath, public RunReport {
   loop::LoopCloser* loop_closer_;  // null without loop closure
   RunListener* listener_;          // may be null
   double loop_wait_s_ = 0.0;
-  // PipelineConfig::return_freed_memory_s; when memory was last returned (after a commit).
-  double return_freed_memory_s_;
+  FreedMemoryReturn freed_memory_return_;
+  // When memory was last returned after a commit, and above the budget (on the frame path).
   SteadyTime freed_memory_returned_at_ = std::chrono::steady_clock::now();
+  SteadyTime over_budget_returned_at_ = freed_memory_returned_at_;
   MapSaver* map_saver_;  // null when the run saves no map
 };
 
