@@ -28,7 +28,7 @@ struct Numbered {
 };
 
 // Patch jobs and described patches travel the graph by pointer: the graph copies its messages
-// (into tasks, buffers and the workers' jobs), and a job holds a patch's colour samples, often
+// (into tasks, buffers and the workers' jobs), and a described patch holds its bitmap, often
 // tens of MB.
 using JobMessage = std::shared_ptr<const PatchJob>;
 using DescribedMessage = std::shared_ptr<DescribedPatch>;
@@ -313,8 +313,8 @@ std::size_t runGraph(FramePath& frames, PatchPath& patches, RunReport& report,
           ids.begin() + static_cast<std::ptrdiff_t>(std::min(ids.size(), first + part)));
       std::vector<planes::PatchSnapshot> finalized = frames.snapshots(some);
       queue(jobs.inOpenBatch(finalized), describe_node);
-      // This part is textured and committed before the next is copied (a describing thread
-      // may idle at its end).
+      // This part is textured and committed before the next is handed over (a describing
+      // thread may idle at its end).
       graph.wait_for_all();
     }
     graph.wait_for_all();  // the retirements, when nothing was finalized

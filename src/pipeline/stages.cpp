@@ -514,8 +514,7 @@ std::size_t PlaneStage::colourSampleBytes() const {
 
 std::vector<planes::PatchSnapshot> PlaneStage::snapshots(const std::vector<int>& ids) const {
   std::vector<planes::PatchSnapshot> out;
-  // cv::Mat's move may throw, so a vector of snapshots copies them, samples and all, as it
-  // grows: reserve.
+  // cv::Mat's move may throw, so a vector of snapshots copies them as it grows: reserve.
   out.reserve(ids.size());
   for (const int id : ids) {
     if (const planes::Patch* patch = map_.find(id)) out.push_back(map_.snapshot(*patch));

@@ -175,6 +175,8 @@ std::set<int> PatchMap::mergePlane(int into_id, int from_id, std::vector<int>& i
       if (!tile.spilled_samples) tiles[key] = &tile;
     }
     const PlaneGeometry& was = *gone.geometry;
+    // Only the tiles that take samples change (a texturing job may hold the others' samples).
+    std::set<Patch*> sampled;
     for (ColourSample sample : gone.samples->all()) {
       const Eigen::Vector3d X = was.origin + sample.u * was.u_axis + sample.v * was.v_axis;
       sample.u = static_cast<float>((X - frame.origin).dot(frame.u_axis));
@@ -184,9 +186,10 @@ std::set<int> PatchMap::mergePlane(int into_id, int from_id, std::vector<int>& i
       if (const auto it = tiles.find(grid.keyOf(cell)); it != tiles.end()) {
         it->second->samples.edit().add(sample);
         took.insert(it->second->id);
+        sampled.insert(it->second);
       }
     }
-    for (const auto& entry : tiles) entry.second->samples.edit().settle();
+    for (Patch* tile : sampled) tile->samples.edit().settle();
     // Cells placed in other tiles than the one that took most.
     for (const Cell& cell : cells) {
       if (const auto it = tiles.find(grid.keyOf(cell)); it != tiles.end()) {

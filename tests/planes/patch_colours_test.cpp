@@ -2,6 +2,7 @@
 // the patches, and pixels of something in front of a patch kept out of its colours.
 #include <algorithm>
 #include <random>
+#include <thread>
 
 #include <gtest/gtest.h>
 
@@ -203,28 +204,42 @@ TEST(PatchColours, PixelsOfAnOccluderNeverReachThePatchBehindIt) {
   EXPECT_EQ(cv::countNonZero(red), 0);
 }
 
+// A grey (200) wall 2 m in front of the camera, its patch in `map` coloured once; colour()
+// colours it again from the same view with another grey.
+struct GreyWall {
+  explicit GreyWall(PatchMap& into) : map(into) {
+    frame.rgb.setTo(cv::Scalar(200, 200, 200));
+    detection = PlaneDetector(PlaneDetectorConfig{}).detect(frame);
+    ids = map.add(observationsOf(frame, detection, T_W_C));
+    map.addColours(frame, detection, T_W_C, ids);
+  }
+  void colour(std::uint8_t grey) {
+    frame.rgb.setTo(cv::Scalar(grey, grey, grey));
+    map.addColours(frame, detection, T_W_C, ids);
+  }
+
+  PatchMap& map;
+  core::Isometry T_W_C = core::Isometry::Identity();
+  core::Frame frame =
+      test::renderPlane(test::kinectIntrinsics(), T_W_C, Eigen::Vector3d(0, 0, -1), -2.0);
+  PlaneDetection detection;
+  std::vector<int> ids;
+};
+
 // A snapshot shares the patch's samples instead of copying them; colours the patch takes
 // afterwards go to a copy the patch makes then, so the snapshot lists what it was taken with.
 // With no snapshot left holding them, the patch changes its samples in place.
 TEST(PatchColours, ASnapshotKeepsItsSamplesWhileThePatchTakesMoreColour) {
-  const core::Isometry T_W_C = core::Isometry::Identity();
-  core::Frame frame =
-      test::renderPlane(test::kinectIntrinsics(), T_W_C, Eigen::Vector3d(0, 0, -1), -2.0);
-  frame.rgb.setTo(cv::Scalar(200, 200, 200));
-  const PlaneDetector detector(PlaneDetectorConfig{});
-  const PlaneDetection detection = detector.detect(frame);
-  ASSERT_EQ(detection.planes.size(), 1u);
   PatchMap map(PatchMapConfig{});
-  const std::vector<int> ids = map.add(observationsOf(frame, detection, T_W_C));
-  map.addColours(frame, detection, T_W_C, ids);
+  GreyWall wall(map);
+  ASSERT_EQ(wall.detection.planes.size(), 1u);
   const Patch& patch = map.patches().front();
   PatchSnapshot snapshot = map.snapshot(patch);
   ASSERT_EQ(snapshot.shared_samples.get(), &*patch.samples);  // shared, not copied
   const std::size_t taken = sampleCount(snapshot);
   ASSERT_GT(taken, 10000u);
 
-  frame.rgb.setTo(cv::Scalar(100, 100, 100));
-  map.addColours(frame, detection, T_W_C, ids);
+  wall.colour(100);
   EXPECT_NE(snapshot.shared_samples.get(), &*patch.samples);
   const std::vector<ColourSample> listed = sampleList(snapshot);
   ASSERT_EQ(listed.size(), taken);
@@ -237,8 +252,35 @@ TEST(PatchColours, ASnapshotKeepsItsSamplesWhileThePatchTakesMoreColour) {
 
   snapshot = {};
   const ColourSamples* own = &*patch.samples;
-  map.addColours(frame, detection, T_W_C, ids);
+  wall.colour(100);
   EXPECT_EQ(&*patch.samples, own);
+}
+
+// The describing thread lists a snapshot's samples while the map thread goes on colouring the
+// patch: the listing sees the colours of the snapshot's time only (under the sanitizers, also
+// that no sample it reads is freed or changed under it).
+TEST(PatchColours, ASnapshotIsListedOnAnotherThreadWhileThePatchChanges) {
+  PatchMap map(PatchMapConfig{});
+  GreyWall wall(map);
+  ASSERT_EQ(wall.detection.planes.size(), 1u);
+  auto snapshot = std::make_shared<const PatchSnapshot>(map.snapshot(map.patches().front()));
+  const std::size_t taken = sampleCount(*snapshot);
+
+  std::size_t wrong = 0, listed = 0;
+  std::thread describer([snapshot = std::move(snapshot), &wrong, &listed]() mutable {
+    for (int round = 0; round < 5; ++round) {
+      for (const ColourSample& sample : sampleList(*snapshot)) {
+        wrong += sample.rgb == std::array<std::uint8_t, 3>{200, 200, 200} ? 0 : 1;
+        ++listed;
+      }
+    }
+    snapshot.reset();  // let go while the map may be changing the patch
+  });
+  for (int round = 0; round < 5; ++round) wall.colour(100);
+  describer.join();
+  EXPECT_EQ(listed, 5 * taken);
+  EXPECT_EQ(wrong, 0u);
+  EXPECT_LT(map.patches().front().samples->all().front().rgb[0], 150);
 }
 
 // The colour image taken 2 cm to the right of where the depth image was (an unsynchronised

@@ -42,7 +42,7 @@ class FramePath {
   // End of the stream: finalizes what is left and says what changed.
   virtual std::vector<planes::PatchEvent> finishStream() = 0;
   // After finishStream: a copy of each patch `ids` names, for texturing. The graph takes them a
-  // few at a time, since each copies a patch's colour samples.
+  // few at a time, so that the backlog's bound holds at the end too.
   virtual std::vector<planes::PatchSnapshot> snapshots(const std::vector<int>& ids) const = 0;
 };
 

@@ -37,8 +37,9 @@ struct PipelineConfig {
   // Finalized patches waiting for their textures, at most: at the bound a replay's source
   // waits and a live device drops frames, so that a backlog cannot grow the memory without end.
   int max_patches_waiting = 4;
-  // Live sources: the bound is the waiting patches' colour samples instead, in MB (their count
-  // is then not bounded), so that a burst of finalizations, a room's surfaces seen again, is
+  // Live sources: the bound is the waiting patches' colour samples instead, in MB as the
+  // describer lists them (20 bytes a sample; till then the jobs share the map's cells), and
+  // their count is not bounded, so that a burst of finalizations, a room's surfaces seen again, is
   // textured a little later rather than costing frames. 0: max_patches_waiting applies live too.
   double live_patches_waiting_mb = 256.0;
   // Seconds between returns of the freed memory glibc keeps to the kernel (malloc_trim, after
@@ -47,8 +48,9 @@ struct PipelineConfig {
   // returns what is held and lowers the trim threshold (core::returnFreedMemorySooner).
   double return_freed_memory_s = 10.0;
   // Resident memory (MB) above which freed memory is also returned after each frame, at most
-  // once a second, on the frame path; 0: never. Bounds what glibc keeps between the returns
-  // above when finalizations come in bursts.
+  // once a second, on the frame path (when at least 150 MB of it is not the heap in use); 0:
+  // never. Bounds what glibc keeps between the returns above when finalizations come in
+  // bursts.
   double return_freed_memory_above_mb = 900.0;
   // Seconds between checkpoints of OUT/map (the state `tessera run --continue` needs), written
   // on the frame path after the plane stage; a run killed outright loses at most this much of

@@ -120,6 +120,10 @@ class SharedColourSamples {
  public:
   explicit SharedColourSamples(ColourSamples samples)
       : samples_(std::make_shared<ColourSamples>(std::move(samples))) {}
+  // Copies share (the next edit() clones); a move copies too, so that no holder is ever left
+  // without samples.
+  SharedColourSamples(const SharedColourSamples&) = default;
+  SharedColourSamples& operator=(const SharedColourSamples&) = default;
   SharedColourSamples& operator=(ColourSamples samples) {
     samples_ = std::make_shared<ColourSamples>(std::move(samples));
     return *this;

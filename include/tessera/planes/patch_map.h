@@ -301,7 +301,7 @@ class PatchMap {
   void textureAgain(int id);
 
   const Patch* find(int id) const;
-  // A copy of patch `id` for texturing (its outline traced, its samples listed).
+  // A copy of patch `id` for texturing (its outline traced, its samples shared with the map).
   PatchSnapshot snapshot(const Patch& patch) const;
   const PatchMapConfig& config() const { return config_; }
   // Whether a region (its least-squares plane and points, world frame) continues `patch`:

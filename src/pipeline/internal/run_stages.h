@@ -71,8 +71,9 @@ class RunStages : public FramePath, public PatchPath, public RunReport {
   void forgetCoveredKeyframes();
   // On the committing thread, off the frame path, at most every freed_memory_return_.every_s.
   void returnFreedMemory();
-  // On the frame path, while resident memory is above freed_memory_return_.above_mb: a burst
-  // of finalizations can fill the heap's free lists faster than the commits come.
+  // On the frame path, while resident memory is above freed_memory_return_.above_mb and much
+  // of it is freed memory: a burst of finalizations can fill the heap's free lists faster than
+  // the commits come.
   void returnFreedMemoryAboveBudget();
 
   SourceStage& source_;
