@@ -95,15 +95,18 @@ void ReintegrationLog::keep(const core::Frame& frame, const core::Isometry& T_W_
 }
 
 SurfaceMesh ReintegrationLog::rebuild(
-    const TsdfConfig& config, const std::function<core::Isometry(std::int64_t)>& correction) const {
+    const TsdfConfig& config,
+    const std::function<std::optional<core::Isometry>(std::int64_t)>& correction) const {
   if (!usable()) throw core::Error(error_);
   TsdfConfig stored = config;
   stored.integration_scale = 1;  // the frames were kept at the integration resolution
   TsdfMap map(stored);
   std::uint64_t index = 0;
   for (const Entry& entry : entries_) {
+    const std::optional<core::Isometry> motion = correction(entry.anchor_ns);
     core::Frame frame;
     frame.index = index++;
+    if (!motion) continue;
     frame.intrinsics = entry.intrinsics;
     frame.depth_mm = cv::imread(entry.depth.string(), cv::IMREAD_UNCHANGED);
     const cv::Mat colour = cv::imread(entry.colour.string(), cv::IMREAD_COLOR);
@@ -111,7 +114,7 @@ SurfaceMesh ReintegrationLog::rebuild(
       throw core::Error(fmt::format("{}: kept frame {} is unreadable", dir_.string(), frame.index));
     }
     cv::cvtColor(colour, frame.rgb, cv::COLOR_BGR2RGB);
-    const core::Isometry T_W_C = correction(entry.anchor_ns) * entry.T_W_C;
+    const core::Isometry T_W_C = *motion * entry.T_W_C;
     map.integrate(frame, T_W_C);
     if (config.release_distance_m > 0.0) map.releaseBlocksBehind(T_W_C, config.release_distance_m);
     if (index % kProgressEvery == 0 && index < entries_.size()) {

@@ -6,6 +6,7 @@ namespace tessera::loop {
 
 void readConfig(const core::ConfigSection& section, LoopConfig& config) {
   section.read("enabled", config.enabled);
+  section.read("hold_apart_unjoined_segments", config.hold_apart_unjoined_segments);
   section.read("min_travel_m", config.min_travel_m);
   section.read("max_descriptor_distance", config.max_descriptor_distance);
   section.read("neighbours_per_descriptor", config.neighbours_per_descriptor);

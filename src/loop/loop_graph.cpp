@@ -79,6 +79,12 @@ int LoopGraph::rootOf(int keyframe) const {
   return segment;
 }
 
+bool LoopGraph::joinedToFirst(int keyframe) const { return rootOf(keyframe) == rootOf(0); }
+
+double LoopGraph::seconds(int keyframe) const {
+  return 1e-9 * static_cast<double>(keyframes_[static_cast<std::size_t>(keyframe)].timestamp_ns);
+}
+
 int LoopGraph::newestOfAnotherSegment(int query) const {
   const int root = rootOf(query);
   for (int segment = segment_of_[static_cast<std::size_t>(query)]; segment-- > 0;) {
@@ -160,7 +166,7 @@ void LoopGraph::add(const fusion::KeyframeRecord& record, bool depth_thinned) {
   const bool following_revisit = last_revisit_query_ >= 0 && !last_revisit_accepted_ &&
                                  query.id - last_revisit_query_ <= config_.confirm_within_keyframes;
   // A segment not joined to the first looks itself up at every keyframe until it is.
-  const bool adrift = rootOf(query.id) != rootOf(0);
+  const bool adrift = !joinedToFirst(query.id);
   const bool lookup =
       following_revisit || adrift || query.id % config_.query_every_n_keyframes == 0;
   if (lookup && place.newest_allowed >= 0) {
@@ -269,7 +275,9 @@ void LoopGraph::acceptLoop(const Pending& loop) {
     segment_parent_[static_cast<std::size_t>(std::max(query_root, match_root))] =
         std::min(query_root, match_root);
     ++stats_.segments_joined;
-    spdlog::info("loop: keyframe {} joins its segment to keyframe {}'s", loop.query, loop.match);
+    spdlog::info("loop: keyframe {} ({:.3f} s) joins its segment to keyframe {}'s ({:.3f} s){}",
+                 loop.query, seconds(loop.query), loop.match, seconds(loop.match),
+                 joinedToFirst(loop.query) ? ": both are in the map now" : "");
   }
 }
 
@@ -349,9 +357,11 @@ MapCorrection LoopGraph::correction() const {
   correction.generation = stats_.optimisations;
   correction.keyframe_ns.reserve(keyframes_.size());
   correction.motion.reserve(keyframes_.size());
+  correction.in_map.reserve(keyframes_.size());
   for (std::size_t k = 0; k < keyframes_.size(); ++k) {
     correction.keyframe_ns.push_back(keyframes_[k].timestamp_ns);
     correction.motion.push_back(corrected_[k] * keyframes_[k].T_W_C.inverse());
+    correction.in_map.push_back(joinedToFirst(static_cast<int>(k)));
   }
   return correction;
 }
@@ -365,6 +375,10 @@ core::Trajectory LoopGraph::correct(const core::Trajectory& trajectory) const {
     }
     if (keyframes_.empty()) {
       out[timestamp_ns] = T_W_C;
+      continue;
+    }
+    // A pose of a segment never joined is at the guess its restart made: not in the map.
+    if (keyframes_[anchor].timestamp_ns <= timestamp_ns && !joinedToFirst(static_cast<int>(anchor))) {
       continue;
     }
     out[timestamp_ns] = corrected_[anchor] * keyframes_[anchor].T_W_C.inverse() * T_W_C;

@@ -87,7 +87,10 @@ fusion::SurfaceMesh finalMesh(RunParts& parts, LoopFigures& loops) {
   try {
     fusion::SurfaceMesh mesh =
         log->rebuild(parts.integration.map().config(),
-                     [&correction](std::int64_t anchor_ns) { return correction.at(anchor_ns); });
+                     [&correction](std::int64_t anchor_ns) -> std::optional<core::Isometry> {
+                       if (!correction.inMap(anchor_ns)) return std::nullopt;  // never joined
+                       return correction.at(anchor_ns);
+                     });
     loops.tsdf_corrected = true;
     loops.tsdf_correction_s =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

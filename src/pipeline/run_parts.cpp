@@ -69,6 +69,9 @@ RunParts::RunParts(core::FrameSource& input, const RunConfig& config, const RunO
              map_saver.get()) {
   planes.spillSamplesTo(sample_dir);
   if (loop_closer) tracking.followLoopClosure();
+  if (loop_closer && config.loop_closure.hold_apart_unjoined_segments) {
+    integration.holdApartUnjoinedSegments();
+  }
   if (loop_closer && config.tsdf.correct_after_loop_closure) {
     integration.keepFramesForCorrection(options.out_dir / "tsdf_frames");
   }

@@ -51,10 +51,21 @@ RunSummary summariseRun(RunParts& parts, const RunOptions& options, double wall_
     loops.wait_s = parts.stages.loopWaitS();
     const core::Trajectory closed = graph.correct(parts.sink.estimate());
     core::writeTumTrajectory(closed, options.out_dir / "trajectory_closed.txt");
+    loops.poses_apart = parts.sink.estimate().size() - closed.size();
     loops.ate_after_closure = core::absoluteTrajectoryError(closed, parts.sink.groundTruth());
     spdlog::info("loop closure: {} keyframes, {} loops closed, {} rejected, pose graph {:.0f} ms",
                  loops.loops.keyframes, loops.loops.loop_closures, loops.loops.rejected(),
                  loops.loops.pose_graph_ms);
+    if (loops.loops.segments > 1) {
+      spdlog::info(
+          "tracking segments: {}, {} joined; {} poses of segments never joined to the first are "
+          "left out of trajectory_closed.txt",
+          loops.loops.segments, loops.loops.segments_joined, loops.poses_apart);
+    }
+    if (loops.ate_after_closure) {
+      spdlog::info("ATE after loop closure: {:.1f} mm RMSE over {} poses",
+                   loops.ate_after_closure->rmse_m * 1e3, loops.ate_after_closure->pairs);
+    }
   }
   summary.stages = {figures("source", parts.source_stage.timer()),
                     figures("tracking", parts.tracking.timer()),

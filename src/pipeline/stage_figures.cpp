@@ -100,6 +100,7 @@ void IntegrationFigures::addTo(json& report) const {
   report["frames_integrated"] = frames_integrated;
   report["frames_without_pose"] = frames_without_pose;
   report["frames_held_out"] = frames_held_out;
+  report["frames_held_apart"] = frames_held_apart;
   report["frames_between_integrations"] = frames_between_integrations;
   report["frames_shed"] = frames_shed;
   report["tsdf_bytes"] = tsdf_bytes;
@@ -217,6 +218,8 @@ void LoopFigures::addTo(json& report) const {
   report["tsdf_correction_s"] = tsdf_correction_s;
   report["ate_after_closure_m"] =
       ate_after_closure ? json(ate_after_closure->rmse_m) : json(nullptr);
+  report["ate_after_closure_pairs"] = ate_after_closure ? ate_after_closure->pairs : 0;
+  report["poses_apart"] = poses_apart;
 }
 
 void ExportFigures::addTo(json& report) const {

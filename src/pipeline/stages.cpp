@@ -3,6 +3,7 @@
 
 #include <chrono>
 
+#include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
 #include "tessera/core/clock.h"
@@ -217,7 +218,32 @@ bool IntegrationStage::wantsFrame(const core::Isometry& T_W_C, std::int64_t arri
   return wanted;
 }
 
+bool IntegrationStage::holdsApart(const TrackedFrame& tracked) {
+  if (!hold_apart_) return false;
+  for (const auto& keyframe : tracked.new_keyframes) {
+    if (keyframe->starts_segment && seen_keyframe_) {
+      apart_since_ = {keyframe->timestamp_ns, tracked.frame.index};
+    }
+    seen_keyframe_ = true;
+  }
+  if (!apart_since_) return false;
+  // Joined once the correction followed knows the segment's first keyframe and puts it in the
+  // map; a correction older than that keyframe knows nothing of it yet.
+  const loop::MapCorrection* correction = loop_correction_.get();
+  if (correction != nullptr && !correction->keyframe_ns.empty() &&
+      correction->keyframe_ns.back() >= apart_since_->first &&
+      correction->inMap(apart_since_->first)) {
+    spdlog::info("frame {}: the segment tracking restarted at frame {} is joined to the map; its "
+                 "frames are fused from here",
+                 tracked.frame.index, apart_since_->second);
+    apart_since_.reset();
+    return false;
+  }
+  return true;
+}
+
 FusedFrame IntegrationStage::process(TrackedFrame tracked) {
+  const bool apart = holdsApart(tracked);  // before its keyframes move on
   FusedFrame fused;
   fused.T_W_C = tracked.T_W_C;
   fused.keyframe_ns = tracked.keyframe_ns;
@@ -234,6 +260,22 @@ FusedFrame IntegrationStage::process(TrackedFrame tracked) {
     fused.held_out = true;
     if (fused.T_W_C) fused.skip_reason = "held out for evaluation (--holdout-every)";
     ++figures_.frames_held_out;
+    fused.figures.tsdf_bytes = map_.memoryBytes();
+    fused.frame = std::move(tracked.frame);
+    return fused;
+  }
+  if (apart && fused.T_W_C) {
+    fused.held_apart = true;
+    fused.skip_reason = fmt::format(
+        "held apart: tracking restarted at frame {} and that segment is not joined to the map "
+        "yet (loop closure)",
+        apart_since_->second);
+    ++figures_.frames_held_apart;
+    // Kept for the TSDF fused again at the end, which takes it if the segment is joined by then.
+    if (log_ && fused.keyframe_ns && fused.keyframe_ns != last_logged_keyframe_ns_) {
+      log_->keep(tracked.frame, *fused.T_W_C, *fused.keyframe_ns);
+      last_logged_keyframe_ns_ = fused.keyframe_ns;
+    }
     fused.figures.tsdf_bytes = map_.memoryBytes();
     fused.frame = std::move(tracked.frame);
     return fused;

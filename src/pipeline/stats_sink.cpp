@@ -47,7 +47,8 @@ StatsSink::StatsSink(const std::filesystem::path& out_dir, std::optional<std::si
        {std::pair{&stats_, &stats_path_}, {&trajectory_, &trajectory_path_}}) {
     if (!*file) throw core::Error(fmt::format("{}: cannot be created", path->string()));
   }
-  trajectory_ << "# camera poses T_W_C of the map (tracked, corrected against the planes): "
+  trajectory_ << "# camera poses T_W_C (tracked, corrected against the planes; in a segment held "
+                 "apart from the map, as tracked): "
                  "timestamp tx ty tz qx qy qz qw\n";
 }
 
@@ -72,7 +73,9 @@ void StatsSink::process(const FusedFrame& fused) {
   const double cpu_s = core::processCpuSeconds();
   const double cpu_ms = 1e3 * (cpu_s - cpu_last_frame_s_);
   cpu_last_frame_s_ = cpu_s;
-  const std::optional<core::Isometry> pose = mapPoseOf(fused);
+  // A frame held apart keeps the tracker's pose here: the corrected trajectory takes it when its
+  // segment is joined to the map by the end.
+  const std::optional<core::Isometry> pose = fused.held_apart ? fused.T_W_C : mapPoseOf(fused);
   if (pose) estimate_[fused.frame.timestamp_ns] = *pose;
   if (fused.frame.T_W_C_gt) ground_truth_[fused.frame.timestamp_ns] = *fused.frame.T_W_C_gt;
   const std::size_t bitmap_bytes = bitmap_bytes_ ? bitmap_bytes_() : 0;

@@ -238,11 +238,51 @@ TEST(LoopGraph, ASegmentAfterALossIsJoinedAcrossAJumpLargerThanTheDriftBound) {
   EXPECT_EQ(stats.segments_joined, 1u);
   EXPECT_GE(stats.loop_closures, 2u);
   for (const double error : secondPassErrors(passes)) EXPECT_LT(error, 0.03);
+  // Joined: every keyframe is in the map, and so is every pose of the trajectory.
+  const MapCorrection correction = passes.graph.correction();
+  for (const bool in_map : correction.in_map) EXPECT_TRUE(in_map);
+  core::Trajectory tracked;
+  for (const KeyframeView& key : passes.graph.keyframes()) tracked[key.timestamp_ns] = key.T_W_C;
+  EXPECT_EQ(passes.graph.correct(tracked).size(), tracked.size());
 
   // The same jump without the restart is more than drift: no loop.
   TwoPasses drifted{LoopGraph(config), {}};
   walkTwice(drifted, jump, false);
   EXPECT_EQ(drifted.graph.stats().loop_closures, 0u);
+}
+
+// Six keyframes along a line, with no features to find a revisit by; tracking restarts at the
+// third. That segment is never joined: its poses are not in the map's frame.
+TEST(LoopGraph, ASegmentNeverJoinedIsLeftOutOfTheMap) {
+  LoopGraph graph{LoopConfig{}};
+  core::Trajectory tracked;
+  for (int i = 0; i < 6; ++i) {
+    fusion::KeyframeRecord record;
+    record.timestamp_ns = (i + 1) * 1'000'000'000LL;
+    record.T_W_C = core::Isometry(Eigen::Translation3d(0.5 * i, 0.0, 1.5));
+    record.depth_m = cv::Mat(16, 16, CV_32F, cv::Scalar(1.5f));
+    record.intrinsics = core::Intrinsics{16, 16, 16.0, 16.0, 7.5, 7.5};
+    record.starts_segment = i == 2;
+    graph.add(record);
+    // A pose at each keyframe and one between it and the next.
+    tracked[record.timestamp_ns] = record.T_W_C;
+    tracked[record.timestamp_ns + 500'000'000] = record.T_W_C;
+  }
+  tracked[0] = core::Isometry::Identity();  // before the first keyframe
+  graph.finish();
+  EXPECT_EQ(graph.stats().segments, 2u);
+  EXPECT_EQ(graph.stats().segments_joined, 0u);
+
+  const MapCorrection correction = graph.correction();
+  EXPECT_EQ(correction.in_map, (std::vector<bool>{true, true, false, false, false, false}));
+  EXPECT_TRUE(correction.inMap(0));
+  EXPECT_TRUE(correction.inMap(2'900'000'000LL));
+  EXPECT_FALSE(correction.inMap(3'000'000'000LL));
+  EXPECT_FALSE(correction.inMap(9'000'000'000LL));  // after the newest: follows it
+
+  const core::Trajectory closed = graph.correct(tracked);
+  EXPECT_EQ(closed.size(), 5u);  // time 0 and the first two keyframes' poses
+  for (const auto& [timestamp_ns, pose] : closed) EXPECT_LT(timestamp_ns, 3'000'000'000LL);
 }
 
 TEST(LoopGraph, TwoIdenticalRoomsCloseNoLoop) {

@@ -10,6 +10,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <functional>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -38,10 +39,12 @@ class ReintegrationLog {
   std::size_t diskBytes() const { return disk_bytes_; }
 
   // A TSDF fused from every kept frame at correction(anchor_ns) * T_W_C, as `config` fuses
-  // (blocks behind released as the frames go, so memory stays that of one live volume).
+  // (blocks behind released as the frames go, so memory stays that of one live volume); a
+  // frame whose correction is nothing is left out (its segment is not in the map).
   // Throws core::Error when the log is not usable or a kept frame cannot be read back.
-  SurfaceMesh rebuild(const TsdfConfig& config,
-                      const std::function<core::Isometry(std::int64_t)>& correction) const;
+  SurfaceMesh rebuild(
+      const TsdfConfig& config,
+      const std::function<std::optional<core::Isometry>(std::int64_t)>& correction) const;
 
  private:
   struct Entry {

@@ -76,7 +76,8 @@ class LoopGraph {
   void finish();
 
   // `trajectory` (tracked poses) moved with the corrections of their keyframes: each pose
-  // follows the last keyframe taken at or before it.
+  // follows the last keyframe taken at or before it. Poses that follow a keyframe of a segment
+  // not joined to the first are left out: they are not in the map's frame.
   core::Trajectory correct(const core::Trajectory& trajectory) const;
 
   // Each keyframe's motion from its tracked pose to its pose after the last optimisation.
@@ -110,6 +111,8 @@ class LoopGraph {
   bool agree(const Pending& a, const Pending& b) const;
   // Segments, joined ones sharing a root (union-find over segment ids).
   int rootOf(int keyframe) const;
+  bool joinedToFirst(int keyframe) const;
+  double seconds(int keyframe) const;  // its time stamp, for messages
   // The newest keyframe of a segment not joined to `query`'s, or -1.
   int newestOfAnotherSegment(int query) const;
   void acceptLoop(const Pending& loop);

@@ -17,10 +17,16 @@ struct MapCorrection {
   // Keyframe times, ascending, and each keyframe's motion.
   std::vector<std::int64_t> keyframe_ns;
   std::vector<core::Isometry> motion;
+  // Per keyframe, whether its tracking segment is joined to the first one (LoopGraph): a
+  // segment begun by a tracking restart sits at a guessed pose until a verified revisit joins it.
+  std::vector<bool> in_map;
 
   // The motion of whatever was placed from a pose at `timestamp_ns`; identity before the first
   // keyframe.
   core::Isometry at(std::int64_t timestamp_ns) const;
+  // Whether a pose at `timestamp_ns` is in the map's frame: its keyframe's segment is joined to
+  // the first (true before the first keyframe, and without segment information).
+  bool inMap(std::int64_t timestamp_ns) const;
 };
 
 }  // namespace tessera::loop

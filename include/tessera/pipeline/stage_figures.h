@@ -109,6 +109,8 @@ struct IntegrationFigures {
   std::size_t frames_integrated = 0;
   std::size_t frames_without_pose = 0;  // no pose, tracking lost, or rejected
   std::size_t frames_held_out = 0;      // posed but not fused or textured (--holdout-every)
+  // Tracked in a segment not (yet) joined to the map: neither fused nor textured.
+  std::size_t frames_held_apart = 0;
   // Posed and searched for planes, not integrated (tsdf.integrate_every_n_frames).
   std::size_t frames_between_integrations = 0;
   std::size_t frames_shed = 0;  // of those, due but late (live: LoadShedding)
@@ -177,7 +179,9 @@ struct LoopFigures {
   loop::LoopStats loops;
   std::size_t instances_retired = 0;  // patches merged after a correction, out of the database
   double wait_s = 0.0;                // the end of the stream waiting for loop closure
-  std::optional<core::AteResult> ate_after_closure;
+  std::optional<core::AteResult> ate_after_closure;  // over the corrected trajectory
+  // Tracked poses left out of the corrected trajectory: their segment was never joined.
+  std::size_t poses_apart = 0;
   // The TSDF fused again at the corrected poses from the frames kept per keyframe.
   bool tsdf_corrected = false;
   std::size_t tsdf_frames_kept = 0;

@@ -97,6 +97,9 @@ struct FusedFrame {
   core::Frame frame;
   bool integrated = false;
   bool held_out = false;  // left out of fusion and texturing (run --holdout-every)
+  // Tracked in a segment not yet joined to the map (IntegrationStage::holdApartUnjoinedSegments):
+  // T_W_C is the tracker's pose, which is not in the map's frame.
+  bool held_apart = false;
   bool own_frame = false;  // as TrackedFrame's
   // Posed and searched for planes, but not integrated (tsdf.integrate_every_n_frames).
   bool between_integrations = false;
@@ -117,6 +120,7 @@ struct FusedFrame {
 
 // The map's pose of a frame: corrected against the patches when the plane stage did so.
 inline std::optional<core::Isometry> mapPoseOf(const FusedFrame& fused) {
+  if (fused.held_apart) return std::nullopt;
   return fused.T_W_C_planes ? fused.T_W_C_planes : fused.T_W_C;
 }
 
@@ -191,6 +195,12 @@ class IntegrationStage {
   // for the TSDF to be fused again at the corrected poses at the end.
   void keepFramesForCorrection(const std::filesystem::path& dir);
   void shedLoad(LoadShedding shedding) { shedding_ = shedding; }
+  // With loop closure: after a tracking restart (a keyframe that starts a segment, the run's
+  // first aside), frames are held apart until the correction followed says that segment is
+  // joined to the first (loop::LoopConfig::hold_apart_unjoined_segments). Their first frame per
+  // keyframe still goes to the log, so that the TSDF fused again at the end has them once
+  // their segment is joined.
+  void holdApartUnjoinedSegments() { hold_apart_ = true; }
   // With loop closure: frames are fused at their keyframe's corrected pose (the newest
   // correction given), so that a place seen again lands on what was fused there before instead
   // of beside it, drifted. The log keeps tracked poses: the correction at the end recomputes.
@@ -205,12 +215,19 @@ class IntegrationStage {
   // Whether the frame posed at T_W_C, arrived at `arrival_ns`, is integrated
   // (TsdfConfig::integrate_every_n_frames, LoadShedding).
   bool wantsFrame(const core::Isometry& T_W_C, std::int64_t arrival_ns);
+  // Notes the segment the tracker restarted in at this frame; whether `tracked` is to be held
+  // apart (its segment not yet joined to the map).
+  bool holdsApart(const TrackedFrame& tracked);
 
   fusion::TsdfMap map_;
   std::unique_ptr<fusion::ReintegrationLog> log_;
   std::optional<std::int64_t> last_logged_keyframe_ns_;
   std::optional<core::Isometry> last_integrated_pose_;
   std::shared_ptr<const loop::MapCorrection> loop_correction_;
+  bool hold_apart_ = false;
+  bool seen_keyframe_ = false;  // the run's first keyframe starts the first segment
+  // The keyframe time and frame at which the segment held apart began.
+  std::optional<std::pair<std::int64_t, std::uint64_t>> apart_since_;
   int posed_since_integrated_ = 0;
   LoadShedding shedding_;
   IntegrationFigures figures_;  // all but tsdf_bytes, read from the map
