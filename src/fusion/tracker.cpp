@@ -180,6 +180,7 @@ struct TrackedImages {
 
 struct Keyframe {
   int id = 0;            // in the order made
+  std::int64_t timestamp_ns = 0;
   TrackedImages images;  // odometry cache built for the destination role
   core::Isometry T_W_C = core::Isometry::Identity();
   SharedFeatures features;
@@ -231,6 +232,7 @@ struct Tracker::State {
   std::int64_t last_motion_ns = 0;
   int lost_in_a_row = 0;
   bool interrupted = false;
+  int segment_first_id = 0;  // the first keyframe of the segment tracked now
   // An earlier session's map was given (continueMap) and no frame is posed in it yet.
   bool awaiting_map = false;
   // past[i] for i below this is a continued map's keyframe in another frame than this
@@ -340,10 +342,13 @@ TrackingResult Tracker::track(const core::Frame& frame, const core::Isometry& in
   };
   // Makes `images` (posed at T_W_C) the keyframe frames are tracked against.
   const auto makeKeyframe = [&](const TrackedImages& images, const core::Isometry& T_W_C,
-                                std::int64_t timestamp_ns, bool starts_segment) {
+                                std::int64_t timestamp_ns, bool starts_segment,
+                                std::optional<std::int64_t> relocalised_against_ns = {}) {
     if (!prepare(images.odometry, cv::rgbd::OdometryFrame::CACHE_DST)) return false;
     auto keyframe = std::make_shared<Keyframe>();
     keyframe->id = s.keyframes_made++;
+    keyframe->timestamp_ns = timestamp_ns;
+    if (starts_segment) s.segment_first_id = keyframe->id;
     keyframe->images = images;
     keyframe->T_W_C = T_W_C;
     keyframe->features = std::make_shared<const FeatureFrame>(
@@ -360,6 +365,7 @@ TrackingResult Tracker::track(const core::Frame& frame, const core::Isometry& in
     record->depth_m = images.depth_m;
     record->intrinsics = k;
     record->starts_segment = starts_segment;
+    record->relocalised_against_ns = relocalised_against_ns;
     record->relocalisation = relocalisation;
     result.new_keyframes.push_back(std::move(record));
     s.keyframes.push_back(keyframe);
@@ -397,7 +403,8 @@ TrackingResult Tracker::track(const core::Frame& frame, const core::Isometry& in
   std::optional<FeatureFrame> current_features;
   // The pose of the current frame from features against the most voted of the kept
   // keyframes up to `newest_allowed` (-1: all) that gives one.
-  const auto lookUpPlaces = [&](int newest_allowed) -> std::optional<core::Isometry> {
+  const auto lookUpPlaces =
+      [&](int newest_allowed) -> std::optional<std::pair<core::Isometry, std::int64_t>> {
     PlaceQuery query;
     query.min_votes = config_.relocalisation_min_votes;
     query.max_candidates = config_.relocalisation_candidates;
@@ -411,21 +418,24 @@ TrackingResult Tracker::track(const core::Frame& frame, const core::Isometry& in
       if (static_cast<std::size_t>(candidate.keyframe) < s.first_in_frame) continue;
       const PastKeyframe& key = s.past[static_cast<std::size_t>(candidate.keyframe)];
       const auto pose = estimateFeaturePose(*key.features, *current_features, k, config_.features);
-      if (pose) return core::Isometry(key.T_W_C * pose->T_current_reference.inverse());
+      if (pose) {
+        return std::pair{core::Isometry(key.T_W_C * pose->T_current_reference.inverse()),
+                         key.timestamp_ns};
+      }
     }
     return std::nullopt;
   };
   if (prepared && !s.reference && s.awaiting_map) {
     // A continued map: the session starts where its first frame is found in it.
     if (const auto found = lookUpPlaces(-1)) {
-      if (!makeKeyframe(current, *found, frame.timestamp_ns, true)) {
+      if (!makeKeyframe(current, found->first, frame.timestamp_ns, true)) {
         result.status = TrackingStatus::kLost;
         return result;
       }
       s.awaiting_map = false;
       result.from_features = true;
       result.relocalised_globally = true;
-      return accept(TrackingStatus::kRelocalised, *found, 0);
+      return accept(TrackingStatus::kRelocalised, found->first, 0);
     }
     if (++s.lost_in_a_row < config_.lost_frames_before_restart) {
       result.problem = "not found in the continued map yet";
@@ -510,16 +520,24 @@ TrackingResult Tracker::track(const core::Frame& frame, const core::Isometry& in
       s.reference = *it;
       status = TrackingStatus::kRelocalised;
     }
+    if (T_W_C && s.reference->id < s.segment_first_id) {
+      // Found against a keyframe made before the last restart: the pose is in that keyframe's
+      // segment, not in the one tracking restarted. The frame starts a segment there, which loop
+      // closure joins to that keyframe's once it verifies the pair.
+      if (makeKeyframe(current, *T_W_C, frame.timestamp_ns, true, s.reference->timestamp_ns)) {
+        return accept(TrackingStatus::kRelocalised, *T_W_C, 0);
+      }
+    }
     if (!T_W_C && config_.relocalise_against_all_keyframes && !s.keyframes.empty()) {
       // Older keyframes: the most voted first; the feature pose alone (their images are gone),
       // and the frame becomes a keyframe that starts a segment there. The recent keyframes
       // were tried: only those kept before them are candidates.
       const int newest_allowed = newestKeptBefore(s.past, s.keyframes.front()->id);
       if (const auto found = newest_allowed < 0 ? std::nullopt : lookUpPlaces(newest_allowed)) {
-        if (makeKeyframe(current, *found, frame.timestamp_ns, true)) {
+        if (makeKeyframe(current, found->first, frame.timestamp_ns, true, found->second)) {
           result.from_features = true;
           result.relocalised_globally = true;
-          return accept(TrackingStatus::kRelocalised, *found, 0);
+          return accept(TrackingStatus::kRelocalised, found->first, 0);
         }
       }
     }

@@ -145,6 +145,9 @@ void LoopGraph::add(const fusion::KeyframeRecord& record, bool depth_thinned) {
   node_of_.push_back(nodes_.size() - 1);
   keyframes_.push_back(std::move(key));
   const KeyframeView& query = keyframes_.back();
+  if (query.starts_segment && record.relocalised_against_ns) {
+    joinRelocalised(query.id, *record.relocalised_against_ns);
+  }
 
   // Candidates: keyframes at least min_travel_m of path behind.
   const auto last_far = std::upper_bound(
@@ -237,6 +240,50 @@ void LoopGraph::add(const fusion::KeyframeRecord& record, bool depth_thinned) {
   if (dirty_) optimise();
   stats_.keyframe_ms += msSince(start);
   stats_.keyframe_cpu_ms += 1e3 * (core::threadCpuSeconds() - cpu_start_s);
+}
+
+bool LoopGraph::joinRelocalised(int query, std::int64_t against_ns) {
+  const auto older =
+      std::lower_bound(keyframes_.begin(), keyframes_.end(), against_ns,
+                       [](const KeyframeView& k, std::int64_t t) { return k.timestamp_ns < t; });
+  // Not one of this graph's keyframes (a continued map's), or its depth is gone (covered).
+  if (older == keyframes_.end() || older->timestamp_ns != against_ns || older->depth_m.empty()) {
+    return false;
+  }
+  const int match = static_cast<int>(older - keyframes_.begin());
+  if (rootOf(match) == rootOf(query)) return false;
+  const KeyframeView& key = keyframes_[static_cast<std::size_t>(query)];
+  ++stats_.candidates_checked;
+  std::string why;
+  const auto verify_start = std::chrono::steady_clock::now();
+  const auto revisit = verifyRevisit(*older, key, config_, why);
+  stats_.verification_ms += msSince(verify_start);
+  if (!revisit) {
+    spdlog::debug("loop: keyframe {} -> {} (relocalised there) not verified: {}", query, match,
+                  why);
+    return false;
+  }
+  ++stats_.revisits_verified;
+  // The tracker's relative pose of the two (both tracked poses) against the revisit's.
+  const core::Isometry tracker = key.T_W_C.inverse() * older->T_W_C;
+  const core::Isometry difference = tracker.inverse() * revisit->T_query_match;
+  if (difference.translation().norm() > config_.consistency_m ||
+      core::rotationAngleDeg(difference) > config_.consistency_deg) {
+    ++stats_.rejected_unconfirmed;
+    spdlog::debug(
+        "loop: keyframe {} -> {} (relocalised there): the revisit and the tracker "
+        "disagree by {:.0f} mm",
+        query, match, 1e3 * difference.translation().norm());
+    return false;
+  }
+  const Pending loop{query, match, *revisit, true, true};
+  acceptLoop(loop);
+  // Accepted, it stays in the window to confirm the revisits after it.
+  pending_.push_back(loop);
+  last_revisit_query_ = query;
+  last_revisit_accepted_ = true;
+  ++stats_.relocalisation_joins;
+  return true;
 }
 
 bool LoopGraph::coveredByOlder(int query) const {

@@ -200,6 +200,7 @@ void LoopFigures::addTo(json& report) const {
   report["loops_rejected_by_graph"] = loops.rejected_by_graph;
   report["tracking_segments"] = loops.segments;
   report["segments_joined"] = loops.segments_joined;
+  report["segments_joined_by_relocalisation"] = loops.relocalisation_joins;
   report["loop_keyframes_covered"] = loops.keyframes_covered;
   report["pose_graph_optimisations"] = loops.optimisations;
   report["pose_graph_ms"] = loops.pose_graph_ms;

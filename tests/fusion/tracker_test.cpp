@@ -125,6 +125,46 @@ TEST(Tracker, ASuddenJumpIsALossAndTrackingGoesOnFromTheLastGoodFrame) {
   EXPECT_LT(translationError(again.T_W_C, *next.T_W_C_gt), 0.01);
 }
 
+TEST(Tracker, FoundAgainstAKeyframeFromBeforeARestartStartsASegmentThere) {
+  // Frames 0 to 2, then a view metres away until tracking restarts there at a guessed pose;
+  // then the walk again, which a keyframe from before the restart recognises. The pose is in
+  // that keyframe's segment, not in the restarted one: the frame starts a segment that names
+  // the keyframe, for loop closure to join the two.
+  const synthetic::Scene scene =
+      synthetic::loadScene(test::sourceDir() / "config/scenes/office.yaml");
+  Tracker tracker(TrackerConfig{});
+  std::int64_t clock_ns = 0;
+  const auto next = [&](int i) {
+    core::Frame frame = officeFrame(scene, i);
+    frame.timestamp_ns = clock_ns += 33'000'000;
+    return frame;
+  };
+  for (int i = 0; i < 3; ++i) {
+    const core::Frame frame = next(i);
+    ASSERT_NE(tracker.track(frame, *frame.T_W_C_gt).status, TrackingStatus::kLost);
+  }
+  TrackingResult away;
+  for (int n = 0; n <= TrackerConfig{}.lost_frames_before_restart; ++n) {
+    away = tracker.track(next(120), core::Isometry::Identity());
+    if (away.status == TrackingStatus::kRestarted) break;
+  }
+  ASSERT_EQ(away.status, TrackingStatus::kRestarted);
+  ASSERT_EQ(away.new_keyframes.size(), 1u);
+  const std::int64_t restart_ns = away.new_keyframes.front()->timestamp_ns;
+  TrackingResult back;
+  core::Frame frame;
+  for (int i = 3; i < 8 && back.status != TrackingStatus::kRelocalised; ++i) {
+    frame = next(i);
+    back = tracker.track(frame, core::Isometry::Identity());
+  }
+  ASSERT_EQ(back.status, TrackingStatus::kRelocalised) << back.problem;
+  EXPECT_LT(translationError(back.T_W_C, *frame.T_W_C_gt), 0.01);
+  ASSERT_EQ(back.new_keyframes.size(), 1u);
+  EXPECT_TRUE(back.new_keyframes.front()->starts_segment);
+  ASSERT_TRUE(back.new_keyframes.front()->relocalised_against_ns.has_value());
+  EXPECT_LT(*back.new_keyframes.front()->relocalised_against_ns, restart_ns);
+}
+
 TEST(Tracker, AFrameWithNoValidDepthIsALoss) {
   const synthetic::Scene scene =
       synthetic::loadScene(test::sourceDir() / "config/scenes/office.yaml");
@@ -252,6 +292,9 @@ TEST(Tracker, ALostFrameIsRelocalisedAgainstAKeyframeFromTheStartOfTheRun) {
   EXPECT_LT(rotationErrorDeg(found.T_W_C, truth), 1.0);
   ASSERT_EQ(found.new_keyframes.size(), 1u);
   EXPECT_TRUE(found.new_keyframes.front()->starts_segment);
+  // It names the keyframe it was found against, one of the walk's (before 5 s).
+  ASSERT_TRUE(found.new_keyframes.front()->relocalised_against_ns.has_value());
+  EXPECT_LT(*found.new_keyframes.front()->relocalised_against_ns, 5'000'000'000);
 
   // Only the recent keyframes: not found again.
   TrackerConfig recent_only;

@@ -251,6 +251,43 @@ TEST(LoopGraph, ASegmentAfterALossIsJoinedAcrossAJumpLargerThanTheDriftBound) {
   EXPECT_EQ(drifted.graph.stats().loop_closures, 0u);
 }
 
+// The office's first 1.4 m of path, then tracking restarts and relocalises against the first
+// keyframe: the new segment's first keyframe is where the tracker found it, `error` off.
+// Returns the graph's figures and whether that keyframe is in the map.
+std::pair<LoopStats, bool> relocalisedAfterAWalk(const core::Isometry& error) {
+  const synthetic::Scene office = scene("office.yaml");
+  LoopConfig config;
+  config.min_travel_m = 100.0;  // no revisit by place recognition within one segment
+  LoopGraph graph(config);
+  for (int frame = 0; frame <= 100; frame += 20) {
+    const core::Isometry truth = office.cameraPose(frame);
+    auto record = keyframeOf(test::officeFrameAt(office, truth, frame), truth);
+    graph.add(record);
+  }
+  // Where the walk began, seen with other noise.
+  const core::Isometry truth = office.cameraPose(0);
+  auto record = keyframeOf(test::officeFrameAt(office, truth, 1000), core::Isometry(error * truth));
+  record.timestamp_ns += 10'000'000'000LL;
+  record.starts_segment = true;
+  record.relocalised_against_ns = graph.keyframes().front().timestamp_ns;
+  graph.add(record);
+  return {graph.stats(), graph.correction().in_map.back()};
+}
+
+TEST(LoopGraph, ASegmentTheTrackerRelocalisedIsJoinedAtItsFirstKeyframe) {
+  const auto [found, found_in_map] = relocalisedAfterAWalk(core::Isometry::Identity());
+  EXPECT_EQ(found.segments, 2u);
+  EXPECT_EQ(found.segments_joined, 1u);
+  EXPECT_EQ(found.relocalisation_joins, 1u);
+  EXPECT_TRUE(found_in_map);
+
+  // A tracker pose 20 cm off the verified one is not taken: the segment stays apart.
+  const auto [wrong, wrong_in_map] =
+      relocalisedAfterAWalk(core::Isometry(Eigen::Translation3d(0.2, 0.0, 0.0)));
+  EXPECT_EQ(wrong.relocalisation_joins, 0u);
+  EXPECT_FALSE(wrong_in_map);
+}
+
 // Six keyframes along a line, with no features to find a revisit by; tracking restarts at the
 // third. That segment is never joined: its poses are not in the map's frame.
 TEST(LoopGraph, ASegmentNeverJoinedIsLeftOutOfTheMap) {

@@ -7,6 +7,7 @@
 // (found through a place index), before tracking goes on.
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -77,6 +78,9 @@ struct KeyframeRecord {
   // Tracking restarted here after a loss, or was relocalised against an old keyframe: its pose
   // does not follow from the keyframe before by odometry.
   bool starts_segment = false;
+  // Relocalised against this older keyframe (its time): its pose was found in that keyframe's
+  // segment, and loop closure joins the two once it verifies the pair.
+  std::optional<std::int64_t> relocalised_against_ns;
   // Kept among the keyframes relocalised against (relocalise_against_all_keyframes): a later
   // session that continues the map relocalises against it too.
   bool relocalisation = false;

@@ -48,6 +48,8 @@ struct LoopStats {
   std::size_t loop_closures = 0;         // loop edges in the optimised graph
   std::size_t segments = 0;              // tracking segments (1 + restarts)
   std::size_t segments_joined = 0;       // joins of a segment to an earlier one
+  // ... of those, where the tracker relocalised against an earlier segment's keyframe
+  std::size_t relocalisation_joins = 0;
   std::size_t keyframes_covered = 0;     // revisits of a kept keyframe's place, not kept
   std::size_t optimisations = 0;
   double pose_graph_ms = 0.0;  // all optimisations together
@@ -116,6 +118,10 @@ class LoopGraph {
   // The newest keyframe of a segment not joined to `query`'s, or -1.
   int newestOfAnotherSegment(int query) const;
   void acceptLoop(const Pending& loop);
+  // A segment the tracker began by relocalising against the keyframe at `against_ns`: joined
+  // to that keyframe's when the pair is verified as a revisit is, and the revisit's pose agrees
+  // with the tracker's (consistency_m, consistency_deg). Whether it was.
+  bool joinRelocalised(int query, std::int64_t against_ns);
   // Whether `query` lies where an older kept keyframe of its segment already stands.
   bool coveredByOlder(int query) const;
   // Lets a covered keyframe's features and depth go.
