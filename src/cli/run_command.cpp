@@ -147,10 +147,14 @@ int runCommand(const RunArguments& args) {
     progress.finish();
     spdlog::info(
         "{} frames in {:.2f} s ({:.1f} frames/s), {} integrated, {} between integrations, {} bad, "
-        "{} without pose",
+        "{} without pose{}",
         summary.stream.frames, summary.wall_s, summary.fps, summary.integration.frames_integrated,
         summary.integration.frames_between_integrations, summary.input.frames_bad,
-        summary.integration.frames_without_pose);
+        summary.integration.frames_without_pose,
+        summary.integration.frames_held_apart > 0
+            ? fmt::format(", {} held apart (tracked in a segment not joined to the map)",
+                          summary.integration.frames_held_apart)
+            : std::string());
     if (summary.tracking.poses == "track") {
       spdlog::info(
           "tracking: {} frames lost, {} relocalised, {} restarts, {} posed from features first",
