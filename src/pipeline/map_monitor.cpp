@@ -112,6 +112,9 @@ nlohmann::json toJson(const MonitorSnapshot& s) {
       {"frames_total", f.frames_total ? nlohmann::json(*f.frames_total) : nlohmann::json(nullptr)},
       {"fps", s.fps},
       {"frames_dropped", f.frames_dropped},
+      {"pose", f.pose},
+      {"frames_without_pose", f.frames_without_pose},
+      {"frames_held_apart", f.frames_held_apart},
       {"latency_ms", orNull(f.figures.latency_ms)},
       {"tsdf_bytes", f.figures.tsdf_bytes},
       {"bitmap_bytes", f.bitmap_bytes},
@@ -197,6 +200,11 @@ std::string toPrometheus(const MonitorSnapshot& s) {
   }
   e.one("tessera_frames_dropped_total", "counter",
         "Live frames the busy pipeline never read", count(f.frames_dropped));
+  e.one("tessera_frames_without_pose_total", "counter",
+        "Frames not fused: tracking lost, or no pose given", count(f.frames_without_pose));
+  e.one("tessera_frames_held_apart_total", "counter",
+        "Frames tracked in a segment not joined to the map, neither fused nor textured",
+        count(f.frames_held_apart));
   e.one("tessera_frames_per_second", "gauge", "Frames through the pipeline over elapsed time",
         s.fps);
   if (f.figures.latency_ms) {

@@ -67,6 +67,10 @@ void StatsSink::process(const FusedFrame& fused) {
     return;
   }
   ++frames_done_;
+  const bool without_pose =
+      !fused.integrated && !fused.between_integrations && !fused.held_out && !fused.held_apart;
+  frames_without_pose_ += without_pose ? 1 : 0;
+  frames_held_apart_ += fused.held_apart ? 1 : 0;
   const FrameFigures& figures = fused.figures;
   if (figures.latency_ms) latencies_ms_.add(*figures.latency_ms);
   // The process's CPU time since the frame before: every thread's share of this frame.
@@ -120,6 +124,9 @@ void StatsSink::process(const FusedFrame& fused) {
     frame.frames_done = frames_done_;
     frame.frames_total = frames_total_;
     frame.frames_dropped = frames_dropped_ ? frames_dropped_() : 0;
+    frame.pose = fused.held_apart ? "held apart" : pose ? "in map" : "lost";
+    frame.frames_without_pose = frames_without_pose_;
+    frame.frames_held_apart = frames_held_apart_;
     frame.figures = figures;
     frame.bitmap_bytes = bitmap_bytes;
     frame.map_bytes = map_bytes_;

@@ -232,7 +232,8 @@ TEST(MonitorServer, AReplaysStatsEndWithItsReport) {
   EXPECT_EQ(stats["state"], "finished");
   EXPECT_EQ(stats["report"], report);
   // (Patches finalized at the end of the stream come after the last frame's figures.)
-  for (const char* key : {"frames", "frames_dropped", "textures_stored", "patterns_stored"}) {
+  for (const char* key : {"frames", "frames_dropped", "frames_without_pose", "frames_held_apart",
+                          "textures_stored", "patterns_stored"}) {
     EXPECT_EQ(stats[key], report[key]) << key;
   }
   EXPECT_GT(stats["textures_stored"].get<int>(), 0);

@@ -26,6 +26,10 @@ struct MonitorFrame {
   std::size_t frames_done = 0;
   std::optional<std::size_t> frames_total;
   std::size_t frames_dropped = 0;  // live sources: frames the busy pipeline never read
+  // The frame's camera pose: "in map", "held apart" (a segment not joined to the map) or
+  // "lost"; and the frames so far without a pose, and held apart.
+  const char* pose = "lost";
+  std::size_t frames_without_pose = 0, frames_held_apart = 0;
   FrameFigures figures;            // the frame's own, as its stats.jsonl line gives them
   std::size_t bitmap_bytes = 0, map_bytes = 0;
   double cpu_ms = 0.0;  // the process's CPU time since the frame before (every thread)

@@ -411,6 +411,7 @@ class StatsSink {
   std::function<std::size_t()> frames_dropped_;
   std::chrono::steady_clock::time_point start_;
   std::size_t frames_done_ = 0;
+  std::size_t frames_without_pose_ = 0, frames_held_apart_ = 0;  // as IntegrationFigures'
   std::size_t map_bytes_ = 0;
   std::size_t interruptions_ = 0;
   core::Trajectory estimate_;
