@@ -343,7 +343,8 @@ TrackingResult Tracker::track(const core::Frame& frame, const core::Isometry& in
   // Makes `images` (posed at T_W_C) the keyframe frames are tracked against.
   const auto makeKeyframe = [&](const TrackedImages& images, const core::Isometry& T_W_C,
                                 std::int64_t timestamp_ns, bool starts_segment,
-                                std::optional<std::int64_t> relocalised_against_ns = {}) {
+                                std::optional<std::int64_t> relocalised_against_ns = {},
+                                bool found_in_continued_map = false) {
     if (!prepare(images.odometry, cv::rgbd::OdometryFrame::CACHE_DST)) return false;
     auto keyframe = std::make_shared<Keyframe>();
     keyframe->id = s.keyframes_made++;
@@ -366,6 +367,7 @@ TrackingResult Tracker::track(const core::Frame& frame, const core::Isometry& in
     record->intrinsics = k;
     record->starts_segment = starts_segment;
     record->relocalised_against_ns = relocalised_against_ns;
+    record->found_in_continued_map = found_in_continued_map;
     record->relocalisation = relocalisation;
     result.new_keyframes.push_back(std::move(record));
     s.keyframes.push_back(keyframe);
@@ -402,9 +404,9 @@ TrackingResult Tracker::track(const core::Frame& frame, const core::Isometry& in
   const bool prepared = prepare(current.odometry, cv::rgbd::OdometryFrame::CACHE_SRC);
   std::optional<FeatureFrame> current_features;
   // The pose of the current frame from features against the most voted of the kept
-  // keyframes up to `newest_allowed` (-1: all) that gives one.
+  // keyframes up to `newest_allowed` (-1: all) that gives one, and that keyframe.
   const auto lookUpPlaces =
-      [&](int newest_allowed) -> std::optional<std::pair<core::Isometry, std::int64_t>> {
+      [&](int newest_allowed) -> std::optional<std::pair<core::Isometry, const PastKeyframe*>> {
     PlaceQuery query;
     query.min_votes = config_.relocalisation_min_votes;
     query.max_candidates = config_.relocalisation_candidates;
@@ -419,8 +421,7 @@ TrackingResult Tracker::track(const core::Frame& frame, const core::Isometry& in
       const PastKeyframe& key = s.past[static_cast<std::size_t>(candidate.keyframe)];
       const auto pose = estimateFeaturePose(*key.features, *current_features, k, config_.features);
       if (pose) {
-        return std::pair{core::Isometry(key.T_W_C * pose->T_current_reference.inverse()),
-                         key.timestamp_ns};
+        return std::pair{core::Isometry(key.T_W_C * pose->T_current_reference.inverse()), &key};
       }
     }
     return std::nullopt;
@@ -534,7 +535,14 @@ TrackingResult Tracker::track(const core::Frame& frame, const core::Isometry& in
       // were tried: only those kept before them are candidates.
       const int newest_allowed = newestKeptBefore(s.past, s.keyframes.front()->id);
       if (const auto found = newest_allowed < 0 ? std::nullopt : lookUpPlaces(newest_allowed)) {
-        if (makeKeyframe(current, found->first, frame.timestamp_ns, true, found->second)) {
+        // A continued map's keyframe is not in this session's loop closure: its frame is the
+        // map's already (the session was found in it, or it would not be a candidate).
+        const bool continued_map =
+            static_cast<std::size_t>(found->second - s.past.data()) < s.continued;
+        if (makeKeyframe(current, found->first, frame.timestamp_ns, true,
+                         continued_map ? std::nullopt
+                                       : std::optional<std::int64_t>(found->second->timestamp_ns),
+                         continued_map)) {
           result.from_features = true;
           result.relocalised_globally = true;
           return accept(TrackingStatus::kRelocalised, found->first, 0);

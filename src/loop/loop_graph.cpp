@@ -137,7 +137,9 @@ void LoopGraph::add(const fusion::KeyframeRecord& record, bool depth_thinned) {
   if (key.starts_segment) {
     const int segment = static_cast<int>(segment_start_.size());
     segment_start_.push_back(key.id);
-    segment_parent_.push_back(segment);
+    // Found in a continued map, the segment is in the map's frame: the first segment's.
+    segment_parent_.push_back(record.found_in_continued_map && segment > 0 ? 0 : segment);
+    segment_start_parent_.push_back(segment_parent_.back());
     stats_.segments = segment_start_.size();
   }
   segment_of_.push_back(static_cast<int>(segment_start_.size()) - 1);
@@ -269,17 +271,13 @@ bool LoopGraph::joinRelocalised(int query, std::int64_t against_ns) {
   const core::Isometry difference = tracker.inverse() * revisit->T_query_match;
   if (difference.translation().norm() > config_.consistency_m ||
       core::rotationAngleDeg(difference) > config_.consistency_deg) {
-    ++stats_.rejected_unconfirmed;
     spdlog::debug(
         "loop: keyframe {} -> {} (relocalised there): the revisit and the tracker "
         "disagree by {:.0f} mm",
         query, match, 1e3 * difference.translation().norm());
     return false;
   }
-  const Pending loop{query, match, *revisit, true, true};
-  acceptLoop(loop);
-  // Accepted, it stays in the window to confirm the revisits after it.
-  pending_.push_back(loop);
+  acceptLoop(Pending{query, match, *revisit, true, true});
   last_revisit_query_ = query;
   last_revisit_accepted_ = true;
   ++stats_.relocalisation_joins;
@@ -318,6 +316,9 @@ void LoopGraph::acceptLoop(const Pending& loop) {
   loops_.push_back({loop.match, loop.query, loop.revisit, false, loop.joins});
   const int query_root = rootOf(loop.query), match_root = rootOf(loop.match);
   if (query_root != match_root) {
+    // A join is re-optimised whatever it moves, so that a correction saying it is published
+    // (the integration stage holds the segment apart until one does).
+    dirty_ = true;
     // The newer segment joins the older one: the root stays the oldest segment.
     segment_parent_[static_cast<std::size_t>(std::max(query_root, match_root))] =
         std::min(query_root, match_root);
@@ -396,6 +397,19 @@ void LoopGraph::optimise() {
   }
   loops_ = std::move(kept);
   stats_.loop_closures = loops_.size();
+  // Segments are joined by the loops kept: a join the graph pruned joins nothing.
+  segment_parent_ = segment_start_parent_;
+  for (const LoopEdge& loop : loops_) {
+    const int query_root = rootOf(loop.query), match_root = rootOf(loop.match);
+    if (query_root != match_root) {
+      segment_parent_[static_cast<std::size_t>(std::max(query_root, match_root))] =
+          std::min(query_root, match_root);
+    }
+  }
+  stats_.segments_joined = 0;
+  for (std::size_t s = 0; s < segment_parent_.size(); ++s) {
+    stats_.segments_joined += segment_parent_[s] != static_cast<int>(s) ? 1 : 0;
+  }
   dirty_ = false;
 }
 
@@ -425,9 +439,7 @@ core::Trajectory LoopGraph::correct(const core::Trajectory& trajectory) const {
       continue;
     }
     // A pose of a segment never joined is at the guess its restart made: not in the map.
-    if (keyframes_[anchor].timestamp_ns <= timestamp_ns && !joinedToFirst(static_cast<int>(anchor))) {
-      continue;
-    }
+    if (!joinedToFirst(static_cast<int>(anchor))) continue;
     out[timestamp_ns] = corrected_[anchor] * keyframes_[anchor].T_W_C.inverse() * T_W_C;
   }
   return out;

@@ -336,14 +336,22 @@ void MapSaver::write(bool final) {
     const std::lock_guard lock(keyframes_mutex_);
     keyframes = keyframes_;
   }
+  std::vector<fusion::MapKeyframe> in_map(
+      keyframes.begin(), keyframes.begin() + static_cast<std::ptrdiff_t>(earlier_keyframes_));
   for (std::size_t i = earlier_keyframes_; i < keyframes.size(); ++i) {
     fusion::MapKeyframe& keyframe = keyframes[i];
     if (const auto pose = trajectory.find(keyframe.timestamp_ns); pose != trajectory.end()) {
       keyframe.T_W_C = pose->second;
-    } else if (loop_correction) {
+    } else if (loop_correction && loop_correction->inMap(keyframe.timestamp_ns)) {
       keyframe.T_W_C = loop_correction->at(keyframe.timestamp_ns) * keyframe.T_W_C;
+    } else {
+      // A keyframe of a segment held apart sits at a guessed pose: a later session found
+      // against it would start in the wrong place.
+      continue;
     }
+    in_map.push_back(std::move(keyframe));
   }
+  keyframes = std::move(in_map);
   fusion::writeMapKeyframes(saving / "keyframes.bin", keyframes);
   trajectory.insert(earlier_trajectory_.begin(), earlier_trajectory_.end());
   core::writeTumTrajectory(trajectory, saving / "trajectory.txt");

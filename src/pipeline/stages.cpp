@@ -1,6 +1,7 @@
 // The frame path's stages: source, tracking, integration and planes.
 #include "tessera/pipeline/stages.h"
 
+#include <algorithm>
 #include <chrono>
 
 #include <fmt/format.h>
@@ -222,7 +223,11 @@ bool IntegrationStage::holdsApart(const TrackedFrame& tracked) {
   if (!hold_apart_) return false;
   for (const auto& keyframe : tracked.new_keyframes) {
     if (keyframe->starts_segment && seen_keyframe_) {
-      apart_since_ = {keyframe->timestamp_ns, tracked.frame.index};
+      if (keyframe->found_in_continued_map) {
+        apart_since_.reset();  // in the map's frame already
+      } else {
+        apart_since_ = {keyframe->timestamp_ns, tracked.frame.index};
+      }
     }
     seen_keyframe_ = true;
   }
@@ -230,12 +235,14 @@ bool IntegrationStage::holdsApart(const TrackedFrame& tracked) {
   // Joined once the correction followed knows the segment's first keyframe and puts it in the
   // map; a correction older than that keyframe knows nothing of it yet.
   const loop::MapCorrection* correction = loop_correction_.get();
-  if (correction != nullptr && !correction->keyframe_ns.empty() &&
-      correction->keyframe_ns.back() >= apart_since_->first &&
+  if (correction != nullptr &&
+      std::binary_search(correction->keyframe_ns.begin(), correction->keyframe_ns.end(),
+                         apart_since_->first) &&
       correction->inMap(apart_since_->first)) {
-    spdlog::info("frame {}: the segment tracking restarted at frame {} is joined to the map; its "
-                 "frames are fused from here",
-                 tracked.frame.index, apart_since_->second);
+    spdlog::info(
+        "frame {}: the tracking segment begun at frame {} is joined to the map; its "
+        "frames are fused from here",
+        tracked.frame.index, apart_since_->second);
     apart_since_.reset();
     return false;
   }
@@ -255,7 +262,7 @@ FusedFrame IntegrationStage::process(TrackedFrame tracked) {
     fused.frame = std::move(tracked.frame);
     return fused;
   }
-  if (core::isHeldOut(tracked.frame.index, figures_.holdout_every)) {
+  if (!apart && core::isHeldOut(tracked.frame.index, figures_.holdout_every)) {
     // Posed (the trajectory keeps it, for the view evaluation) but not part of the map.
     fused.held_out = true;
     if (fused.T_W_C) fused.skip_reason = "held out for evaluation (--holdout-every)";
@@ -267,8 +274,8 @@ FusedFrame IntegrationStage::process(TrackedFrame tracked) {
   if (apart && fused.T_W_C) {
     fused.held_apart = true;
     fused.skip_reason = fmt::format(
-        "held apart: tracking restarted at frame {} and that segment is not joined to the map "
-        "yet (loop closure)",
+        "held apart: the tracking segment begun at frame {} (a restart, or a relocalisation "
+        "against an earlier segment) is not joined to the map yet (loop closure)",
         apart_since_->second);
     ++figures_.frames_held_apart;
     // Kept for the TSDF fused again at the end, which takes it if the segment is joined by then.

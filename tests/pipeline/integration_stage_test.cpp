@@ -90,7 +90,7 @@ TEST(IntegrationStage, HoldsASegmentAfterARestartApartUntilItIsJoined) {
   EXPECT_TRUE(apart.held_apart);
   EXPECT_TRUE(apart.T_W_C.has_value());
   EXPECT_FALSE(mapPoseOf(apart).has_value()) << "not a pose in the map's frame";
-  EXPECT_NE(apart.skip_reason.find("restarted at frame 3"), std::string::npos) << apart.skip_reason;
+  EXPECT_NE(apart.skip_reason.find("begun at frame 3"), std::string::npos) << apart.skip_reason;
   // A correction that knows the segment but has not joined it: still apart.
   stage.followLoopClosure(correctionOf(false));
   EXPECT_TRUE(stage.process(frameWithKeyframe(4, false)).held_apart);

@@ -63,7 +63,8 @@ struct TrackerConfig {
 void readConfig(const core::ConfigSection& section, TrackerConfig& config);
 
 // kRelocalised: found again after a loss or a source interruption, against a recent keyframe,
-// or against an older one (then a new segment starts at the pose it gives).
+// or against an older one; a new segment starts at the pose it gives when that keyframe is an
+// older one, or one made before the last restart.
 // kRestarted: not found again; a new segment starts at the last good pose.
 enum class TrackingStatus { kFirst, kTracked, kLost, kRelocalised, kRestarted };
 
@@ -81,6 +82,10 @@ struct KeyframeRecord {
   // Relocalised against this older keyframe (its time): its pose was found in that keyframe's
   // segment, and loop closure joins the two once it verifies the pair.
   std::optional<std::int64_t> relocalised_against_ns;
+  // Relocalised against a continued map's keyframe (`tessera run --continue`): the pose is in
+  // the map's frame, though loop closure, which has this session's keyframes only, cannot
+  // verify it.
+  bool found_in_continued_map = false;
   // Kept among the keyframes relocalised against (relocalise_against_all_keyframes): a later
   // session that continues the map relocalises against it too.
   bool relocalisation = false;

@@ -8,9 +8,10 @@ namespace tessera::loop {
 
 struct LoopConfig {
   bool enabled = true;
-  // After a tracking restart the new segment sits at a guessed pose: its frames are neither
-  // fused nor textured until a verified revisit joins it to the first segment, and poses of a
-  // segment never joined are left out of the corrected trajectory.
+  // After a tracking restart the new segment sits at a guessed pose (after a relocalisation
+  // against an earlier segment, in that segment's frame): its frames are neither fused nor
+  // textured until a verified revisit joins it to the first segment. Poses of a segment never
+  // joined are left out of the corrected trajectory whatever this says.
   bool hold_apart_unjoined_segments = true;
   // Place recognition: a keyframe is a revisit candidate for a query only when the camera
   // travelled at least this far between them (nearer ones are what odometry already links).

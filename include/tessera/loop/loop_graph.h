@@ -143,6 +143,9 @@ class LoopGraph {
   std::vector<int> segment_of_;      // per keyframe
   std::vector<int> segment_start_;   // per segment, its first keyframe
   std::vector<int> segment_parent_;  // per segment, union-find parent
+  // ... as the segment began (itself, or the first when found in a continued map); the loops
+  // kept join them from there after each optimisation.
+  std::vector<int> segment_start_parent_;
   int last_revisit_query_ = -1;  // the last keyframe whose lookup verified a revisit
   bool last_revisit_accepted_ = false;  // ... and whether it was confirmed
   bool dirty_ = false;  // loops added since the last optimisation

@@ -27,7 +27,8 @@ struct PatchSurface {
 class RunListener {
  public:
   virtual ~RunListener() = default;
-  // The map's pose of a frame (tracked, corrected against the planes), at its capture time.
+  // The map's pose of a frame (tracked, corrected against the planes), at its capture time;
+  // none for a frame without pose or held apart (FusedFrame::held_apart).
   virtual void onPose(std::int64_t timestamp_ns, const core::Isometry& T_W_C) = 0;
   virtual void onPatch(const PatchSurface& patch) = 0;
   // The patch was merged into another: it leaves the map.
