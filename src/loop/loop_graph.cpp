@@ -81,6 +81,13 @@ int LoopGraph::rootOf(int keyframe) const {
 
 bool LoopGraph::joinedToFirst(int keyframe) const { return rootOf(keyframe) == rootOf(0); }
 
+bool LoopGraph::joinSegments(int keyframe_a, int keyframe_b) {
+  const int root_a = rootOf(keyframe_a), root_b = rootOf(keyframe_b);
+  if (root_a == root_b) return false;
+  segment_parent_[static_cast<std::size_t>(std::max(root_a, root_b))] = std::min(root_a, root_b);
+  return true;
+}
+
 double LoopGraph::seconds(int keyframe) const {
   return 1e-9 * static_cast<double>(keyframes_[static_cast<std::size_t>(keyframe)].timestamp_ns);
 }
@@ -314,14 +321,10 @@ void LoopGraph::acceptLoop(const Pending& loop) {
     dirty_ = true;
   }
   loops_.push_back({loop.match, loop.query, loop.revisit, false, loop.joins});
-  const int query_root = rootOf(loop.query), match_root = rootOf(loop.match);
-  if (query_root != match_root) {
+  if (joinSegments(loop.query, loop.match)) {
     // A join is re-optimised whatever it moves, so that a correction saying it is published
     // (the integration stage holds the segment apart until one does).
     dirty_ = true;
-    // The newer segment joins the older one: the root stays the oldest segment.
-    segment_parent_[static_cast<std::size_t>(std::max(query_root, match_root))] =
-        std::min(query_root, match_root);
     ++stats_.segments_joined;
     spdlog::info("loop: keyframe {} ({:.3f} s) joins its segment to keyframe {}'s ({:.3f} s){}",
                  loop.query, seconds(loop.query), loop.match, seconds(loop.match),
@@ -399,13 +402,7 @@ void LoopGraph::optimise() {
   stats_.loop_closures = loops_.size();
   // Segments are joined by the loops kept: a join the graph pruned joins nothing.
   segment_parent_ = segment_start_parent_;
-  for (const LoopEdge& loop : loops_) {
-    const int query_root = rootOf(loop.query), match_root = rootOf(loop.match);
-    if (query_root != match_root) {
-      segment_parent_[static_cast<std::size_t>(std::max(query_root, match_root))] =
-          std::min(query_root, match_root);
-    }
-  }
+  for (const LoopEdge& loop : loops_) joinSegments(loop.query, loop.match);
   stats_.segments_joined = 0;
   for (std::size_t s = 0; s < segment_parent_.size(); ++s) {
     stats_.segments_joined += segment_parent_[s] != static_cast<int>(s) ? 1 : 0;

@@ -114,6 +114,9 @@ class LoopGraph {
   // Segments, joined ones sharing a root (union-find over segment ids).
   int rootOf(int keyframe) const;
   bool joinedToFirst(int keyframe) const;
+  // Joins the two keyframes' segments, the newer under the older so that the root stays the
+  // oldest. Whether they were apart.
+  bool joinSegments(int keyframe_a, int keyframe_b);
   double seconds(int keyframe) const;  // its time stamp, for messages
   // The newest keyframe of a segment not joined to `query`'s, or -1.
   int newestOfAnotherSegment(int query) const;
