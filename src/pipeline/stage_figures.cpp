@@ -120,6 +120,8 @@ void PlaneFigures::addTo(json& report) const {
   report["loop_corrections_followed"] = loop_corrections_followed;
   report["loop_planes_moved"] = loop_planes_moved;
   report["loop_planes_merged"] = loop_planes_merged;
+  report["loop_tiles_moved_within_planes"] = loop_tiles_moved_within_planes;
+  report["loop_follow_ms"] = loop_follow_ms;
 }
 
 void BitmapFigures::addTo(json& report) const {

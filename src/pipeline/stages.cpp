@@ -524,14 +524,23 @@ void PlaneStage::followLoopClosure(std::shared_ptr<const loop::MapCorrection> ne
   if (!follows_loops_) return;
   if (!newest || (loop_correction_ && newest->generation == loop_correction_->generation)) return;
   loop_correction_ = std::move(newest);
+  const auto start = std::chrono::steady_clock::now();
+  const std::size_t tiles_before = map_.tilesMovedWithinPlanes();
   const std::size_t moved = map_.followCorrection(
       [this](std::int64_t keyframe_ns) { return loop_correction_->at(keyframe_ns); });
   const std::size_t merged = map_.mergeCoinciding();
+  const double ms =
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+  const std::size_t tiles = map_.tilesMovedWithinPlanes() - tiles_before;
   ++figures_.loop_corrections_followed;
   figures_.loop_planes_moved += moved;
   figures_.loop_planes_merged += merged;
-  spdlog::info("loop closure: the map followed optimisation {}: {} planes moved, {} merged",
-               loop_correction_->generation, moved, merged);
+  figures_.loop_tiles_moved_within_planes += tiles;
+  figures_.loop_follow_ms += ms;
+  spdlog::info(
+      "loop closure: the map followed optimisation {}: {} planes moved ({} tiles within their "
+      "plane), {} merged, in {:.0f} ms",
+      loop_correction_->generation, moved, tiles, merged, ms);
 }
 
 core::Isometry PlaneStage::loopMotion(std::int64_t keyframe_ns) const {

@@ -2,7 +2,10 @@
 // place mapped twice (once before the drift, once after) becomes one plane again.
 #include <algorithm>
 #include <cmath>
+#include <limits>
+#include <map>
 #include <optional>
+#include <set>
 #include <utility>
 #include <vector>
 
@@ -31,9 +34,11 @@ std::size_t PatchMap::followCorrection(
     Eigen::Vector4d turn = Eigen::Vector4d::Zero();  // quaternion coefficients, summed
     double weight = 0.0;
     bool any = false;
+    std::map<std::int64_t, core::Isometry> steps;
     for (auto& [keyframe_ns, observer] : plane.observers) {
       const core::Isometry target = motion_at(keyframe_ns);
       const core::Isometry step = target * observer.motion.inverse();
+      steps.emplace(keyframe_ns, step);
       observer.motion = target;
       any = any || step.translation().norm() >= kMinMove_m ||
             core::rotationAngleDeg(step) >= kMinTurn_deg;
@@ -51,9 +56,161 @@ std::size_t PatchMap::followCorrection(
     motion.linear() = R;
     motion.translation() = centroid + shift / weight - R * centroid;
     plane.move(motion);
+    moveWithinPlane(plane, motion, steps);
     ++moved_planes;
   }
   return moved_planes;
+}
+
+bool PatchMap::moveWithinPlane(Plane& plane, const core::Isometry& plane_motion,
+                               const std::map<std::int64_t, core::Isometry>& steps) {
+  if (!config_.move_within_plane || plane.blocks.empty()) return false;
+  // The plane's frame has moved with it; a block at (u, v) was at `back * moved` before.
+  const PlaneGeometry& now = *plane.geometry;
+  const core::Isometry back = plane_motion.inverse();
+  const double cell_m = config_.cell_m, block_m = Plane::kBlockCells * cell_m;
+  const auto centreOf = [&](const Cell& key, double side_m) {
+    return Eigen::Vector2d((key.first + 0.5) * side_m, (key.second + 0.5) * side_m);
+  };
+  const auto cellAt = [&](const Eigen::Vector2d& uv) {
+    return Cell{static_cast<int>(std::floor(uv.x() / cell_m)),
+                static_cast<int>(std::floor(uv.y() / cell_m))};
+  };
+  // Each block is owed, besides what earlier corrections left, where its keyframes' moves take
+  // its centre (their mean, weighted by points) less where the plane's move took it, within
+  // the plane.
+  std::set<Cell> due_tiles;  // tiles with a block owed enough to show
+  for (auto& [key, block] : plane.blocks) {
+    const Eigen::Vector2d uv = centreOf(key, block_m);
+    const Eigen::Vector3d moved = now.origin + uv.x() * now.u_axis + uv.y() * now.v_axis;
+    const Eigen::Vector3d was = back * moved;
+    Eigen::Vector3d target = Eigen::Vector3d::Zero();
+    double points = 0.0;
+    for (const Plane::Source& source : block.sources) {
+      const auto step = steps.find(source.keyframe_ns);
+      if (step == steps.end()) continue;
+      target += source.points * (step->second * was);
+      points += source.points;
+    }
+    if (points <= 0.0) continue;
+    const Eigen::Vector3d residual = target / points - moved;
+    block.owed += Eigen::Vector2d(residual.dot(now.u_axis), residual.dot(now.v_axis)).cast<float>();
+    if (block.owed.norm() >= config_.min_move_within_plane_m) {
+      due_tiles.insert(plane.grid.keyOf(cellAt(uv)));
+    }
+  }
+  if (due_tiles.empty()) return false;
+  // In a due tile every block moves by what it is owed; the others wait for a later correction.
+  std::map<Cell, Eigen::Vector2d> shifts;
+  for (const auto& [key, block] : plane.blocks) {
+    if (due_tiles.count(plane.grid.keyOf(cellAt(centreOf(key, block_m)))) > 0) {
+      shifts.emplace(key, block.owed.cast<double>());
+    }
+  }
+  // Samples come tile by tile: most look up the block the one before them did.
+  Cell last_block{std::numeric_limits<int>::min(), 0};
+  Eigen::Vector2d last_shift = Eigen::Vector2d::Zero();
+  const auto shiftAt = [&](const Eigen::Vector2d& uv) {
+    const Cell block = Plane::blockOf(cellAt(uv));
+    if (block != last_block) {
+      const auto it = shifts.find(block);
+      last_block = block;
+      last_shift = it == shifts.end() ? Eigen::Vector2d::Zero().eval() : it->second;
+    }
+    return last_shift;
+  };
+
+  // Take the cells out of the due tiles, then put them back at their shifted places, in
+  // whichever tile now holds each.
+  std::vector<Cell> cells;
+  std::vector<Patch*> due;
+  std::set<int> changed;
+  for (const Cell& key : due_tiles) {
+    const auto id = plane.tiles.find(key);
+    if (id == plane.tiles.end()) continue;
+    Patch& tile = patchWithId(id->second);
+    restoreSamples(tile);
+    for (const Cell& c : tile.cells) {
+      const Eigen::Vector2d centre = centreOf(c, cell_m);
+      cells.push_back(cellAt(centre + shiftAt(centre)));
+    }
+    tile.cells.clear();
+    due.push_back(&tile);
+    changed.insert(tile.id);
+  }
+  plane.extendGrid(cells);
+  for (const Cell& c : cells) {
+    Patch& tile = tileAt(plane.id, plane.grid.keyOf(c));
+    restoreSamples(tile);
+    tile.cells.insert(c);
+    changed.insert(tile.id);
+  }
+  // The samples, one due tile at a time (its old samples are let go before the next): into the
+  // due tiles' new samples, or added to another tile's.
+  std::map<int, ColourSamples> rebuilt;
+  for (const Patch* tile : due) {
+    rebuilt.emplace(tile->id, ColourSamples(config_.sample_cell_m, config_.sample_views));
+  }
+  std::set<Patch*> sampled;
+  Cell last_key{std::numeric_limits<int>::min(), 0};
+  ColourSamples* into = nullptr;
+  for (Patch* tile : due) {
+    const std::vector<ColourSample> samples = tile->samples->all();
+    tile->samples = ColourSamples(config_.sample_cell_m, config_.sample_views);
+    for (ColourSample sample : samples) {
+      const Eigen::Vector2d shift = shiftAt(Eigen::Vector2d(sample.u, sample.v));
+      sample.u += static_cast<float>(shift.x());
+      sample.v += static_cast<float>(shift.y());
+      const Cell key = plane.grid.keyOf(cellAt(Eigen::Vector2d(sample.u, sample.v)));
+      if (key != last_key) {
+        last_key = key;
+        into = nullptr;
+        if (const auto id = plane.tiles.find(key); id != plane.tiles.end()) {
+          if (const auto fresh = rebuilt.find(id->second); fresh != rebuilt.end()) {
+            into = &fresh->second;
+          } else {
+            Patch& other = patchWithId(id->second);
+            restoreSamples(other);
+            into = &other.samples.edit();
+            sampled.insert(&other);
+          }
+        }
+      }
+      if (into != nullptr) into->add(sample);  // none: moved off every tile
+    }
+  }
+  for (auto& [id, samples] : rebuilt) {
+    samples.settle();
+    patchWithId(id).samples = std::move(samples);
+  }
+  for (Patch* tile : sampled) tile->samples.edit().settle();
+  // The blocks of the due tiles move too, their debt paid.
+  std::map<Cell, Plane::Block> was_blocks;
+  was_blocks.swap(plane.blocks);
+  for (auto& [key, block] : was_blocks) {
+    const Eigen::Vector2d centre = centreOf(key, block_m);
+    if (shifts.count(key) == 0) plane.blocks[key].owed += block.owed;  // its tile was not due
+    const Cell to = Plane::blockOf(cellAt(centre + shiftAt(centre)));
+    for (const Plane::Source& source : block.sources) {
+      plane.addSource(to, source.keyframe_ns, source.points);
+    }
+  }
+  for (const int id : changed) {
+    Patch& tile = patchWithId(id);
+    if (!tile.cells.empty()) {
+      // A new version from the moved cells and samples, once the burst of corrections is over.
+      tile.finalized = false;
+      tile.frames_to_settle = config_.out_of_view_frames;
+      continue;
+    }
+    // Everything it held moved into a neighbouring tile.
+    if (tile.version > 0) pending_.push_back({PatchEvent::Kind::kRetired, tile.id, tile.version});
+    seen_this_frame_.erase(tile.id);
+    plane.tiles.erase(tile.tile);
+    patches_.erase(tile.id);
+  }
+  tiles_moved_within_planes_ += changed.size();
+  return true;
 }
 
 std::optional<std::pair<int, int>> PatchMap::findCoinciding() const {

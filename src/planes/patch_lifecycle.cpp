@@ -23,9 +23,11 @@ std::vector<PatchEvent> PatchMap::endFrame(long frame_index) {
   pending_.clear();
   for (auto& [id, patch] : patches_) {
     const double area = areaM2(patch);
+    const bool settled = patch.frames_to_settle == 0;
+    if (!settled) --patch.frames_to_settle;
     if (seen_this_frame_.count(patch.id) == 0) {
       const bool gone_long = frame_index - patch.last_seen_frame >= config_.out_of_view_frames;
-      if (!patch.finalized && gone_long && area >= config_.min_area_m2) {
+      if (!patch.finalized && settled && gone_long && area >= config_.min_area_m2) {
         finalize(patch, events, "out of view");
       }
       continue;
@@ -42,7 +44,7 @@ std::vector<PatchEvent> PatchMap::endFrame(long frame_index) {
     const bool stable =
         patch.area_in_view.size() > static_cast<std::size_t>(config_.stable_frames) &&
         area <= patch.area_in_view.front() * (1.0 + config_.max_growth);
-    if (!patch.finalized && stable && area >= config_.min_area_m2)
+    if (!patch.finalized && settled && stable && area >= config_.min_area_m2)
       finalize(patch, events, "stable");
   }
   seen_this_frame_.clear();

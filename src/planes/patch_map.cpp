@@ -115,19 +115,29 @@ int PatchMap::placeCells(int plane_id, const std::vector<Cell>& cells) {
 }
 
 int PatchMap::placePoints(int plane_id, const std::vector<Eigen::Vector3d>& points,
-                          const PointMoments& moments) {
+                          const PointMoments& moments, std::optional<std::int64_t> keyframe_ns) {
   std::vector<Cell> cells;
+  std::vector<float> counts;  // points per entry of `cells`
   {
     const PlaneGeometry& geometry = *planes_.at(plane_id).geometry;
     Cell last{std::numeric_limits<int>::min(), 0};
     for (const auto& X : points) {
       const Cell c = geometry.cellOf(X, config_.cell_m);
-      if (c != last) cells.push_back(c);  // points come in raster order
+      if (c != last) {  // points come in raster order
+        cells.push_back(c);
+        counts.push_back(0.0F);
+      }
+      counts.back() += 1.0F;
       last = c;
     }
   }
   const int id = placeCells(plane_id, cells);
   Plane& plane = planes_.at(plane_id);
+  if (keyframe_ns && config_.move_within_plane) {
+    std::map<Cell, float> by_block;
+    for (std::size_t i = 0; i < cells.size(); ++i) by_block[Plane::blockOf(cells[i])] += counts[i];
+    for (const auto& [block, count] : by_block) plane.addSource(block, *keyframe_ns, count);
+  }
   plane.moments.add(moments);
   plane.refit();
   return id;
@@ -145,6 +155,19 @@ std::set<int> PatchMap::mergePlane(int into_id, int from_id, std::vector<int>& i
   for (const auto& [keyframe_ns, observer] : planes_.at(from_id).observers) {
     into.observers[keyframe_ns].points += observer.points;
     into.observers[keyframe_ns].motion = observer.motion;
+  }
+  {
+    // Each block's keyframes go to the receiving plane's block at the same place.
+    const PlaneGeometry& was = *planes_.at(from_id).geometry;
+    const double block_m = Plane::kBlockCells * config_.cell_m;
+    for (const auto& [key, block] : planes_.at(from_id).blocks) {
+      const Eigen::Vector3d centre = was.origin + (key.first + 0.5) * block_m * was.u_axis +
+                                     (key.second + 0.5) * block_m * was.v_axis;
+      const Cell to = Plane::blockOf(into.geometry->cellOf(centre, config_.cell_m));
+      for (const Plane::Source& source : block.sources) {
+        into.addSource(to, source.keyframe_ns, source.points);
+      }
+    }
   }
   planes_.erase(from_id);
 
@@ -241,7 +264,7 @@ std::vector<int> PatchMap::add(const std::vector<PlaneObservation>& observations
     // The region joins every plane it continues: they were parts of one plane.
     const int kept = planes.front();
     for (std::size_t m = planes.size(); m-- > 1;) mergePlane(kept, planes[m], ids);
-    ids.push_back(placePoints(kept, observation.points_W, moments));
+    ids.push_back(placePoints(kept, observation.points_W, moments, observation.keyframe_ns));
     if (observation.keyframe_ns) {
       Plane::Observer& observer = planes_.at(kept).observers[*observation.keyframe_ns];
       observer.points += static_cast<double>(observation.points_W.size());

@@ -64,6 +64,29 @@ Cell TileGrid::keyOf(const Cell& cell) const {
   return key;
 }
 
+Cell Plane::blockOf(const Cell& cell) {
+  return {floorDiv(cell.first, kBlockCells), floorDiv(cell.second, kBlockCells)};
+}
+
+void Plane::addSource(const Cell& block, std::int64_t keyframe_ns, float points) {
+  std::vector<Source>& block_sources = blocks[block].sources;
+  const auto same = std::find_if(block_sources.begin(), block_sources.end(),
+                                 [&](const Source& s) { return s.keyframe_ns == keyframe_ns; });
+  if (same != block_sources.end()) {
+    same->points += points;
+    return;
+  }
+  if (block_sources.size() < kSourcesPerBlock) {
+    block_sources.push_back({keyframe_ns, points});
+    return;
+  }
+  // Full: the new keyframe takes the place of the one that gave least, if it gave more.
+  const auto least =
+      std::min_element(block_sources.begin(), block_sources.end(),
+                       [](const Source& a, const Source& b) { return a.points < b.points; });
+  if (least->points < points) *least = {keyframe_ns, points};
+}
+
 void Plane::refit() {
   const PlaneFit fit = fitPlane(moments);
   // Keep the orientation the plane was created with.

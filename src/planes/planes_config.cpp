@@ -36,6 +36,8 @@ void readConfig(const core::ConfigSection& section, PatchMapConfig& config) {
   section.read("colour_neighbour_offset_m", config.colour_neighbour_offset_m);
   section.read("max_offset_m", config.max_offset_m);
   section.read("merge_bend_deg", config.merge_bend_deg);
+  section.read("move_within_plane", config.move_within_plane);
+  section.read("min_move_within_plane_m", config.min_move_within_plane_m);
   section.read("cell_m", config.cell_m);
   section.read("stable_frames", config.stable_frames);
   section.read("max_growth", config.max_growth);
@@ -54,6 +56,9 @@ void readConfig(const core::ConfigSection& section, PatchMapConfig& config) {
   if (config.max_normal_angle_deg <= 0.0 || config.max_offset_m <= 0.0 || config.cell_m <= 0.0) {
     throw core::ConfigError(
         "patches: max_normal_angle_deg, max_offset_m and cell_m must be positive");
+  }
+  if (config.min_move_within_plane_m <= 0.0) {
+    throw core::ConfigError("patches: min_move_within_plane_m must be positive");
   }
   if (config.merge_bend_deg < 0.0 || config.merge_bend_deg >= 90.0) {
     throw core::ConfigError("patches: merge_bend_deg must be in [0, 90)");

@@ -149,5 +149,74 @@ TEST(PatchCorrection, APieceOfABentPlaneMergesAtItsFarEndButNotNearItsCentroid) 
   }
 }
 
+// The share of points, 1 cm inside the edges of the checkerboard's 10 cm squares across the
+// wall z = 1.5 from x = x_lo to x_hi, whose colour in the map is not the wall's there.
+double wrongColourShare(const PatchMap& map, double x_lo, double x_hi) {
+  std::size_t wrong = 0, compared = 0;
+  for (double x = x_lo; x < x_hi; x += 0.1) {
+    for (const double dx : {0.01, 0.09}) {
+      for (double y = -0.45; y < 0.5; y += 0.1) {
+        const Eigen::Vector3d X(x + dx, y, 1.5);
+        const bool dark = (static_cast<long>(std::floor(X.x() * 10)) +
+                           static_cast<long>(std::floor(X.y() * 10)) + 15) %
+                              2 !=
+                          0;
+        for (const Patch& patch : map.patches()) {
+          const PlaneGeometry& g = *patch.geometry;
+          const auto colour =
+              patch.samples->colourAt(static_cast<float>((X - g.origin).dot(g.u_axis)),
+                                      static_cast<float>((X - g.origin).dot(g.v_axis)));
+          if (!colour) continue;
+          ++compared;
+          wrong += ((*colour)[0] < 130.0F) != dark ? 1 : 0;
+          break;
+        }
+      }
+    }
+  }
+  return compared == 0 ? 1.0 : static_cast<double>(wrong) / static_cast<double>(compared);
+}
+
+// A wall fused from two keyframes side by side, the second placed 3 cm too far along the wall
+// (drift along it, which moving the plane cannot show). The correction moves the second
+// keyframe 3 cm back: the plane as a whole moves by the mean, about 1.5 cm, and each half's
+// cells and colours move within the plane by the rest, so that both halves' checkerboards are
+// where the wall has them.
+TEST(PatchCorrection, CellsMoveWithinThePlaneByTheirOwnKeyframesCorrection) {
+  PatchMap map(quickConfig());
+  for (int i = 0; i < 3; ++i) {
+    seeWall(map, shifted(0.0, 0.0), shifted(0.0, 0.0), 1000 + i);
+    map.endFrame(i);
+  }
+  for (int i = 0; i < 3; ++i) {
+    seeWall(map, shifted(1.8, 0.0), shifted(1.83, 0.0), 5000 + i);
+    map.endFrame(3 + i);
+  }
+  ASSERT_EQ(map.patches().size(), 1u) << "the two views should make one wall";
+  ASSERT_EQ(map.planes().size(), 1u);
+  EXPECT_GT(map.planes().begin()->second.blocks.size(), 100u);
+  // Before the correction the second half's squares sit 3 cm off: about half the points 1 cm
+  // inside an edge show the neighbouring square's colour.
+  EXPECT_LT(wrongColourShare(map, -0.8, 0.8), 0.02);
+  EXPECT_GT(wrongColourShare(map, 1.0, 2.6), 0.4);
+
+  EXPECT_EQ(map.followCorrection([](std::int64_t t) {
+    return t >= 5000 ? shifted(-0.03, 0.0) : core::Isometry::Identity();
+  }),
+            1u);
+  ASSERT_EQ(map.patches().size(), 1u);
+  EXPECT_LT(wrongColourShare(map, -0.8, 0.8), 0.02);
+  EXPECT_LT(wrongColourShare(map, 1.0, 2.6), 0.02);
+  // The wall's cells cover its two views again: none pushed apart or piled up.
+  const double area = map.areaM2(map.patches().front());
+  EXPECT_FALSE(map.patches().front().finalized);
+  // The same correction again moves nothing within the plane.
+  EXPECT_EQ(map.followCorrection([](std::int64_t t) {
+    return t >= 5000 ? shifted(-0.03, 0.0) : core::Isometry::Identity();
+  }),
+            0u);
+  EXPECT_NEAR(map.areaM2(map.patches().front()), area, 1e-9);
+}
+
 }  // namespace
 }  // namespace tessera::planes

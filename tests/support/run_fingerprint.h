@@ -75,6 +75,7 @@ inline std::string runFingerprint(const std::filesystem::path& run_dir) {
                              "loop_place_lookup_ms",
                              "loop_place_index_ms",
                              "loop_verification_ms",
+                             "loop_follow_ms",
                              "loop_wait_s",
                              "stages",
                              "db",

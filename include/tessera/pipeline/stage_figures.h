@@ -132,6 +132,10 @@ struct PlaneFigures {
   std::size_t plane_searches_shed = 0;  // late frames whose plane search was left out
   // Loop-closure corrections the map followed, planes they moved and planes merged after.
   std::size_t loop_corrections_followed = 0, loop_planes_moved = 0, loop_planes_merged = 0;
+  // Tiles whose cells and colours moved within their plane (patches.move_within_plane), and
+  // the plane stage's time following corrections, in all.
+  std::size_t loop_tiles_moved_within_planes = 0;
+  double loop_follow_ms = 0.0;
   void addTo(nlohmann::json& report) const;
 };
 

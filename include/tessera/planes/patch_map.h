@@ -45,6 +45,12 @@ struct PatchMapConfig {
   // a floor that tracking drift bent over metres, so there the offset bound grows by
   // tan(merge_bend_deg) per metre from the older plane's centroid.
   double merge_bend_deg = 0.3;
+  // After a loop closure, the cells and colours of each 10 cm block also move within the plane
+  // by their own keyframes' correction (Plane::sources), not only with the plane as a whole.
+  bool move_within_plane = true;
+  // A tile moves once some block of it is owed this much; smaller moves wait (and add up), so
+  // that each small correction does not texture the plane again.
+  double min_move_within_plane_m = 0.01;
   double cell_m = 0.05;               // occupancy grid cell in the plane
   // Finalization: a patch in view is stable once its area grew by at most max_growth (a
   // fraction) over its last stable_frames frames in view; a patch not seen for
@@ -140,6 +146,9 @@ struct Patch {
   std::deque<double> area_in_view;  // area after each of the last frames the patch was seen in
   long last_seen_frame = -1;
   int frames_seen = 0;
+  // Frames to wait before finalizing again after its content moved within its plane: the
+  // optimisations of one loop closure come in bursts, and each new version is textured anew.
+  int frames_to_settle = 0;
 
   // The plane's, for the tile's users.
   const Eigen::Vector3d& normal() const { return geometry->normal; }
@@ -279,6 +288,8 @@ class PatchMap {
   // leaves the samples in memory, with a warning.
   std::size_t releaseIdleSamples(long frame_index);
   std::size_t samplesReleased() const { return samples_released_; }
+  // Tiles whose cells and samples moved within their plane after corrections, over the run.
+  std::size_t tilesMovedWithinPlanes() const { return tiles_moved_within_planes_; }
 
   // The map for a later session to continue (`tessera run --continue`): planes, tiles, cells
   // and finalization state to `file`, each tile's colour samples to
@@ -319,10 +330,17 @@ class PatchMap {
   double areaM2(const Patch& patch) const;
 
  private:
-  // Adds a region's points to plane `plane_id`, cutting new tiles as they are needed; returns
-  // the id of the tile that got most of them.
+  // Adds a region's points to plane `plane_id`, cutting new tiles as they are needed, and
+  // counts them as the keyframe's in their blocks (Plane::sources); returns the id of the tile
+  // that got most of them.
   int placePoints(int plane_id, const std::vector<Eigen::Vector3d>& points,
-                  const PointMoments& moments);
+                  const PointMoments& moments, std::optional<std::int64_t> keyframe_ns);
+  // After plane `plane` moved by `plane_motion` (followCorrection): each block's cells and
+  // samples move within the plane by where its keyframes' own moves (`steps`, by keyframe
+  // time) take it, less where the plane's move took it. The tiles whose content moved grow a
+  // new version. Returns whether any did.
+  bool moveWithinPlane(Plane& plane, const core::Isometry& plane_motion,
+                       const std::map<std::int64_t, core::Isometry>& steps);
   // Moves every tile of plane `from_id` (cells, samples) into plane `into_id`'s tiles; the
   // tiles moved are gone, and ids handed out for them become the tiles that took them.
   // Returns the ids of the tiles that took cells or samples.
@@ -342,6 +360,7 @@ class PatchMap {
 
   PatchMapConfig config_;
   std::map<int, Patch> patches_;  // the tiles, by patch id
+  std::size_t tiles_moved_within_planes_ = 0;
   std::map<int, Plane> planes_;   // by plane id
   std::set<int> seen_this_frame_;
   std::set<int> set_aside_;          // plane ids (setAsideAll)

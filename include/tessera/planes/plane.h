@@ -3,6 +3,7 @@
 // least-squares refit), how it is cut into tiles and which keyframes saw it. Its tiles (Patch)
 // hold the cells and colours; they read the plane's geometry and never keep a copy of it.
 #include <array>
+#include <cstddef>
 #include <cstdint>
 #include <map>
 #include <memory>
@@ -65,6 +66,28 @@ struct Plane {
     core::Isometry motion = core::Isometry::Identity();
   };
   std::map<std::int64_t, Observer> observers;
+  // Where on the plane each keyframe's points fell: per block of kBlockCells x kBlockCells
+  // cells, the keyframes that gave it most points (at most kSourcesPerBlock). A correction
+  // moves each block within the plane by its own keyframes' moves, where the plane as a whole
+  // moves by their mean (PatchMap::followCorrection): a floor fused along a drifting path is
+  // bent back in its plane, not only turned and shifted.
+  static constexpr int kBlockCells = 2;
+  static constexpr std::size_t kSourcesPerBlock = 8;
+  struct Source {
+    std::int64_t keyframe_ns = 0;
+    float points = 0.0F;
+  };
+  struct Block {
+    std::vector<Source> sources;
+    // The in-plane move (u, v metres) corrections asked of the block and not yet made: its
+    // tile moves once some block of it is owed enough to show.
+    Eigen::Vector2f owed = Eigen::Vector2f::Zero();
+  };
+  std::map<Cell, Block> blocks;  // by block (cell / kBlockCells, floored)
+  static Cell blockOf(const Cell& cell);
+  // Counts `points` points from `keyframe_ns` in `block`; the block keeps the keyframes that
+  // gave it most.
+  void addSource(const Cell& block, std::int64_t keyframe_ns, float points);
 
   // Fits the plane to every point it got, keeping the side its normal points to.
   void refit();
