@@ -218,5 +218,50 @@ TEST(PatchCorrection, CellsMoveWithinThePlaneByTheirOwnKeyframesCorrection) {
   EXPECT_NEAR(map.areaM2(map.patches().front()), area, 1e-9);
 }
 
+// A correction too small to show (under patches.min_move_within_plane_m) moves no tile within
+// its plane, but is owed: the next one adds to it, and the tile then moves by both. Its new
+// version waits out_of_view_frames frames after the move, so that a burst of corrections
+// textures it once.
+TEST(PatchCorrection, SmallMovesWithinThePlaneAddUpAndTheNewVersionWaitsForTheBurstToEnd) {
+  PatchMap map(quickConfig());
+  long frame = 0;
+  for (int i = 0; i < 3; ++i) {
+    seeWall(map, shifted(0.0, 0.0), shifted(0.0, 0.0), 1000 + i);
+    map.endFrame(frame++);
+  }
+  for (int i = 0; i < 3; ++i) {
+    seeWall(map, shifted(1.8, 0.0), shifted(1.83, 0.0), 5000 + i);
+    map.endFrame(frame++);
+  }
+  std::vector<PatchEvent> events = map.finalizeAll();
+  ASSERT_EQ(finalizedIds(events).size(), 1u);
+  const auto back_by = [](double x) {
+    return
+        [x](std::int64_t t) { return t >= 5000 ? shifted(-x, 0.0) : core::Isometry::Identity(); };
+  };
+  // 1.2 cm back: each half is owed about 6 mm, under the 1 cm a tile waits for.
+  map.followCorrection(back_by(0.012));
+  EXPECT_EQ(map.tilesMovedWithinPlanes(), 0u);
+  EXPECT_TRUE(map.patches().front().finalized);
+  EXPECT_GT(wrongColourShare(map, 1.0, 2.6), 0.2);
+  // The rest of the 3 cm: the owed 6 mm and these 9 mm move the tile.
+  map.followCorrection(back_by(0.03));
+  EXPECT_EQ(map.tilesMovedWithinPlanes(), 1u);
+  EXPECT_LT(wrongColourShare(map, -0.8, 0.8), 0.02);
+  EXPECT_LT(wrongColourShare(map, 1.0, 2.6), 0.02);
+  ASSERT_FALSE(map.patches().front().finalized);
+  // Out of view, it is finalized again only once out_of_view_frames have passed.
+  const long moved_at = frame;
+  std::vector<long> finalized_at;
+  for (int i = 0; i < 2 * quickConfig().out_of_view_frames; ++i) {
+    for (const PatchEvent& e : map.endFrame(frame)) {
+      if (e.kind == PatchEvent::Kind::kFinalized) finalized_at.push_back(frame);
+    }
+    ++frame;
+  }
+  ASSERT_EQ(finalized_at.size(), 1u);
+  EXPECT_EQ(finalized_at.front() - moved_at, quickConfig().out_of_view_frames);
+}
+
 }  // namespace
 }  // namespace tessera::planes
