@@ -358,9 +358,14 @@ void MapSaver::write(bool final) {
 
   // Each patch's bitmap and layers of its current version; a patch whose commit has not
   // caught up has none, and a session that continues the map textures it again. The map
-  // holds its own names for the bitmaps' files: the run's are replaced by newer versions.
+  // holds its own names for the bitmaps' files: the run's are replaced by newer versions. A
+  // patch waiting for its next version (grown, merged, or moved within its plane after a loop
+  // closure; at the end one under the area bound never gets it) has none: its bitmap is stale,
+  // and the run's export drops its files.
   std::map<int, int> versions;
-  for (const planes::Patch& patch : patches.patches()) versions[patch.id] = patch.version;
+  for (const planes::Patch& patch : patches.patches()) {
+    if (patch.finalized) versions[patch.id] = patch.version;
+  }
   const planes::TextureBindings bitmaps = bitmaps_.linkCurrentInto(saving, versions);
   const auto instances = commit_.instancesNow();
   json list = json::array();

@@ -1,5 +1,6 @@
-// PatchMap after a loop closure: planes move with the keyframes they were seen from, and a
-// place mapped twice (once before the drift, once after) becomes one plane again.
+// PatchMap after a loop closure: planes move with the keyframes they were seen from, their
+// blocks within them by their own keyframes, and a place mapped twice (once before the drift,
+// once after) becomes one plane again.
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -200,7 +201,7 @@ bool PatchMap::moveWithinPlane(Plane& plane, const core::Isometry& plane_motion,
     if (!tile.cells.empty()) {
       // A new version from the moved cells and samples, once the burst of corrections is over.
       tile.finalized = false;
-      tile.frames_to_settle = config_.out_of_view_frames;
+      tile.frames_to_settle = config_.moved_settle_frames;
       continue;
     }
     // Everything it held moved into a neighbouring tile.

@@ -15,6 +15,7 @@ PatchMapConfig quickConfig() {
   PatchMapConfig config;
   config.stable_frames = 5;
   config.out_of_view_frames = 5;
+  config.moved_settle_frames = 8;
   return config;
 }
 
@@ -220,7 +221,7 @@ TEST(PatchCorrection, CellsMoveWithinThePlaneByTheirOwnKeyframesCorrection) {
 
 // A correction too small to show (under patches.min_move_within_plane_m) moves no tile within
 // its plane, but is owed: the next one adds to it, and the tile then moves by both. Its new
-// version waits out_of_view_frames frames after the move, so that a burst of corrections
+// version waits moved_settle_frames frames after the move, so that a burst of corrections
 // textures it once.
 TEST(PatchCorrection, SmallMovesWithinThePlaneAddUpAndTheNewVersionWaitsForTheBurstToEnd) {
   PatchMap map(quickConfig());
@@ -250,17 +251,17 @@ TEST(PatchCorrection, SmallMovesWithinThePlaneAddUpAndTheNewVersionWaitsForTheBu
   EXPECT_LT(wrongColourShare(map, -0.8, 0.8), 0.02);
   EXPECT_LT(wrongColourShare(map, 1.0, 2.6), 0.02);
   ASSERT_FALSE(map.patches().front().finalized);
-  // Out of view, it is finalized again only once out_of_view_frames have passed.
+  // Out of view, it is finalized again only once moved_settle_frames have passed.
   const long moved_at = frame;
   std::vector<long> finalized_at;
-  for (int i = 0; i < 2 * quickConfig().out_of_view_frames; ++i) {
+  for (int i = 0; i < 2 * quickConfig().moved_settle_frames; ++i) {
     for (const PatchEvent& e : map.endFrame(frame)) {
       if (e.kind == PatchEvent::Kind::kFinalized) finalized_at.push_back(frame);
     }
     ++frame;
   }
   ASSERT_EQ(finalized_at.size(), 1u);
-  EXPECT_EQ(finalized_at.front() - moved_at, quickConfig().out_of_view_frames);
+  EXPECT_EQ(finalized_at.front() - moved_at, quickConfig().moved_settle_frames);
 }
 
 }  // namespace

@@ -46,11 +46,14 @@ struct PatchMapConfig {
   // tan(merge_bend_deg) per metre from the older plane's centroid.
   double merge_bend_deg = 0.3;
   // After a loop closure, the cells and colours of each 10 cm block also move within the plane
-  // by their own keyframes' correction (Plane::sources), not only with the plane as a whole.
+  // by their own keyframes' correction (Plane::blocks), not only with the plane as a whole.
   bool move_within_plane = true;
   // A tile moves once some block of it is owed this much; smaller moves wait (and add up), so
   // that each small correction does not texture the plane again.
   double min_move_within_plane_m = 0.01;
+  // A tile moved within its plane is finalized again (textured anew) no sooner than this many
+  // frames after its last move: the optimisations of loop closures come in bursts.
+  int moved_settle_frames = 300;
   double cell_m = 0.05;               // occupancy grid cell in the plane
   // Finalization: a patch in view is stable once its area grew by at most max_growth (a
   // fraction) over its last stable_frames frames in view; a patch not seen for
@@ -146,8 +149,8 @@ struct Patch {
   std::deque<double> area_in_view;  // area after each of the last frames the patch was seen in
   long last_seen_frame = -1;
   int frames_seen = 0;
-  // Frames to wait before finalizing again after its content moved within its plane: the
-  // optimisations of one loop closure come in bursts, and each new version is textured anew.
+  // Frames to wait before finalizing again after its content moved within its plane
+  // (PatchMapConfig::moved_settle_frames).
   int frames_to_settle = 0;
 
   // The plane's, for the tile's users.
@@ -267,9 +270,10 @@ class PatchMap {
   // call) and returns the finalizations and retirements it caused.
   std::vector<PatchEvent> endFrame(long frame_index);
   // Loop closure moved the keyframes: each keyframe's points on a plane should move by
-  // motion_at(keyframe) * (the motion they were placed with)^-1. A plane is rigid, so it moves
-  // by the mean of its keyframes' moves, weighted by how many points each gave, about its
-  // centroid. Cells and samples keep their (u, v). Returns how many planes moved.
+  // motion_at(keyframe) * (the motion they were placed with)^-1. A plane stays a plane, so it
+  // moves by the mean of its keyframes' moves, weighted by how many points each gave, about
+  // its centroid; with move_within_plane each block's cells and samples then move within it by
+  // the rest of their own keyframes' moves (moveWithinPlane). Returns how many planes moved.
   std::size_t followCorrection(
       const std::function<core::Isometry(std::int64_t keyframe_ns)>& motion_at);
   // Merges each plane into an older one it now continues (the association bounds, touching
@@ -331,7 +335,7 @@ class PatchMap {
 
  private:
   // Adds a region's points to plane `plane_id`, cutting new tiles as they are needed, and
-  // counts them as the keyframe's in their blocks (Plane::sources); returns the id of the tile
+  // counts them as the keyframe's in their blocks (Plane::blocks); returns the id of the tile
   // that got most of them.
   int placePoints(int plane_id, const std::vector<Eigen::Vector3d>& points,
                   const PointMoments& moments, std::optional<std::int64_t> keyframe_ns);
