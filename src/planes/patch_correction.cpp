@@ -80,6 +80,18 @@ bool PatchMap::moveWithinPlane(Plane& plane, const core::Isometry& plane_motion,
   // Each block is owed, besides what earlier corrections left, where its keyframes' moves take
   // its centre (their mean, weighted by points) less where the plane's move took it, within
   // the plane.
+  // A block may straddle two tiles (a tile's edge need not fall on the block grid): it is due
+  // in the tiles of each of its cells.
+  const auto tilesOfBlock = [&](const Cell& key) {
+    std::set<Cell> keys;
+    for (int du = 0; du < Plane::kBlockCells; ++du) {
+      for (int dv = 0; dv < Plane::kBlockCells; ++dv) {
+        keys.insert(plane.grid.keyOf(
+            {key.first * Plane::kBlockCells + du, key.second * Plane::kBlockCells + dv}));
+      }
+    }
+    return keys;
+  };
   std::set<Cell> due_tiles;  // tiles with a block owed enough to show
   for (auto& [key, block] : plane.blocks) {
     const Eigen::Vector2d uv = centreOf(key, block_m);
@@ -97,33 +109,48 @@ bool PatchMap::moveWithinPlane(Plane& plane, const core::Isometry& plane_motion,
     const Eigen::Vector3d residual = target / points - moved;
     block.owed += Eigen::Vector2d(residual.dot(now.u_axis), residual.dot(now.v_axis)).cast<float>();
     if (block.owed.norm() >= config_.min_move_within_plane_m) {
-      due_tiles.insert(plane.grid.keyOf(cellAt(uv)));
+      const std::set<Cell> keys = tilesOfBlock(key);
+      due_tiles.insert(keys.begin(), keys.end());
     }
   }
   if (due_tiles.empty()) return false;
-  // In a due tile every block moves by what it is owed; the others wait for a later correction.
-  std::map<Cell, Eigen::Vector2d> shifts;
+  // In a due tile every block moves by what it is owed (its samples exactly, its cells by whole
+  // cells, the rest kept as its lag); the others wait for a later correction.
+  struct Shift {
+    Eigen::Vector2d samples = Eigen::Vector2d::Zero();
+    Eigen::Vector2i cells = Eigen::Vector2i::Zero();
+  };
+  std::map<Cell, Shift> shifts;
   for (const auto& [key, block] : plane.blocks) {
-    if (due_tiles.count(plane.grid.keyOf(cellAt(centreOf(key, block_m)))) > 0) {
-      shifts.emplace(key, block.owed.cast<double>());
+    const std::set<Cell> keys = tilesOfBlock(key);
+    if (std::none_of(keys.begin(), keys.end(),
+                     [&](const Cell& tile) { return due_tiles.count(tile) > 0; })) {
+      continue;
     }
+    Shift shift;
+    shift.samples = block.owed.cast<double>();
+    const Eigen::Vector2d total = (block.owed + block.cell_lag).cast<double>() / cell_m;
+    shift.cells = Eigen::Vector2i(static_cast<int>(std::lround(total.x())),
+                                  static_cast<int>(std::lround(total.y())));
+    shifts.emplace(key, shift);
   }
   // Samples come tile by tile: most look up the block the one before them did.
   Cell last_block{std::numeric_limits<int>::min(), 0};
-  Eigen::Vector2d last_shift = Eigen::Vector2d::Zero();
-  const auto shiftAt = [&](const Eigen::Vector2d& uv) {
+  Shift last_shift;
+  const auto shiftAt = [&](const Eigen::Vector2d& uv) -> const Shift& {
     const Cell block = Plane::blockOf(cellAt(uv));
     if (block != last_block) {
       const auto it = shifts.find(block);
       last_block = block;
-      last_shift = it == shifts.end() ? Eigen::Vector2d::Zero().eval() : it->second;
+      last_shift = it == shifts.end() ? Shift{} : it->second;
     }
     return last_shift;
   };
 
   // Take the cells out of the due tiles, then put them back at their shifted places, in
-  // whichever tile now holds each.
-  std::vector<Cell> cells;
+  // whichever tile now holds each. A tile the move creates takes the footprint and exposure
+  // figures of the tile its first cell came from.
+  std::vector<std::pair<Cell, Patch*>> cells;  // where each goes, and the tile it came from
   std::vector<Patch*> due;
   std::set<int> changed;
   for (const Cell& key : due_tiles) {
@@ -132,16 +159,26 @@ bool PatchMap::moveWithinPlane(Plane& plane, const core::Isometry& plane_motion,
     Patch& tile = patchWithId(id->second);
     restoreSamples(tile);
     for (const Cell& c : tile.cells) {
-      const Eigen::Vector2d centre = centreOf(c, cell_m);
-      cells.push_back(cellAt(centre + shiftAt(centre)));
+      const Eigen::Vector2i by = shiftAt(centreOf(c, cell_m)).cells;
+      cells.push_back({{c.first + by.x(), c.second + by.y()}, &tile});
     }
     tile.cells.clear();
     due.push_back(&tile);
     changed.insert(tile.id);
   }
-  plane.extendGrid(cells);
-  for (const Cell& c : cells) {
+  {
+    std::vector<Cell> to;
+    to.reserve(cells.size());
+    for (const auto& entry : cells) to.push_back(entry.first);
+    plane.extendGrid(to);
+  }
+  for (const auto& [c, from] : cells) {
     Patch& tile = tileAt(plane.id, plane.grid.keyOf(c));
+    if (tile.footprint_pixels == 0 && tile.cells.empty()) {
+      tile.footprint_sum_m = from->footprint_sum_m;
+      tile.footprint_pixels = from->footprint_pixels;
+      tile.log_gain_sum = from->log_gain_sum;
+    }
     restoreSamples(tile);
     tile.cells.insert(c);
     changed.insert(tile.id);
@@ -159,7 +196,7 @@ bool PatchMap::moveWithinPlane(Plane& plane, const core::Isometry& plane_motion,
     const std::vector<ColourSample> samples = tile->samples->all();
     tile->samples = ColourSamples(config_.sample_cell_m, config_.sample_views);
     for (ColourSample sample : samples) {
-      const Eigen::Vector2d shift = shiftAt(Eigen::Vector2d(sample.u, sample.v));
+      const Eigen::Vector2d& shift = shiftAt(Eigen::Vector2d(sample.u, sample.v)).samples;
       sample.u += static_cast<float>(shift.x());
       sample.v += static_cast<float>(shift.y());
       const Cell key = plane.grid.keyOf(cellAt(Eigen::Vector2d(sample.u, sample.v)));
@@ -174,6 +211,7 @@ bool PatchMap::moveWithinPlane(Plane& plane, const core::Isometry& plane_motion,
             restoreSamples(other);
             into = &other.samples.edit();
             sampled.insert(&other);
+            changed.insert(other.id);  // its content changed: a new version
           }
         }
       }
@@ -185,17 +223,29 @@ bool PatchMap::moveWithinPlane(Plane& plane, const core::Isometry& plane_motion,
     patchWithId(id).samples = std::move(samples);
   }
   for (Patch* tile : sampled) tile->samples.edit().settle();
-  // The blocks of the due tiles move too, their debt paid.
+  // The blocks of the due tiles move too, their debt paid (but for their cells' lag).
   std::map<Cell, Plane::Block> was_blocks;
   was_blocks.swap(plane.blocks);
   for (auto& [key, block] : was_blocks) {
+    const auto shift = shifts.find(key);
+    if (shift == shifts.end()) {  // its tiles were not due
+      Plane::Block& kept = plane.blocks[key];
+      kept.owed += block.owed;
+      kept.cell_lag = block.cell_lag;
+      for (const Plane::Source& source : block.sources) {
+        plane.addSource(key, source.keyframe_ns, source.points);
+      }
+      continue;
+    }
     const Eigen::Vector2d centre = centreOf(key, block_m);
-    if (shifts.count(key) == 0) plane.blocks[key].owed += block.owed;  // its tile was not due
-    const Cell to = Plane::blockOf(cellAt(centre + shiftAt(centre)));
+    const Cell to = Plane::blockOf(cellAt(centre + shift->second.samples));
     for (const Plane::Source& source : block.sources) {
       plane.addSource(to, source.keyframe_ns, source.points);
     }
+    plane.blocks[to].cell_lag = block.owed + block.cell_lag -
+                                shift->second.cells.cast<float>() * static_cast<float>(cell_m);
   }
+  tiles_moved_within_planes_ += due.size();
   for (const int id : changed) {
     Patch& tile = patchWithId(id);
     if (!tile.cells.empty()) {
@@ -205,12 +255,11 @@ bool PatchMap::moveWithinPlane(Plane& plane, const core::Isometry& plane_motion,
       continue;
     }
     // Everything it held moved into a neighbouring tile.
-    if (tile.version > 0) pending_.push_back({PatchEvent::Kind::kRetired, tile.id, tile.version});
-    seen_this_frame_.erase(tile.id);
+    if (tile.version > 0) pending_.push_back({PatchEvent::Kind::kRetired, id, tile.version});
+    seen_this_frame_.erase(id);
     plane.tiles.erase(tile.tile);
-    patches_.erase(tile.id);
+    patches_.erase(id);
   }
-  tiles_moved_within_planes_ += changed.size();
   return true;
 }
 

@@ -18,6 +18,12 @@ void PatchMap::finalize(Patch& patch, std::vector<PatchEvent>& events, const cha
       {PatchEvent::Kind::kFinalized, patch.id, patch.version, patch.finalized_area_m2, reason});
 }
 
+bool PatchMap::largeEnough(const Patch& patch, double area_m2) const {
+  // A tile finalized before stays in the map when a move within its plane left it smaller: its
+  // earlier version would otherwise stay published over what moved away.
+  return area_m2 >= config_.min_area_m2 || (patch.version > 0 && area_m2 > 0.0);
+}
+
 std::vector<PatchEvent> PatchMap::endFrame(long frame_index) {
   std::vector<PatchEvent> events = std::move(pending_);
   pending_.clear();
@@ -27,7 +33,7 @@ std::vector<PatchEvent> PatchMap::endFrame(long frame_index) {
     if (!settled) --patch.frames_to_settle;
     if (seen_this_frame_.count(patch.id) == 0) {
       const bool gone_long = frame_index - patch.last_seen_frame >= config_.out_of_view_frames;
-      if (!patch.finalized && settled && gone_long && area >= config_.min_area_m2) {
+      if (!patch.finalized && settled && gone_long && largeEnough(patch, area)) {
         finalize(patch, events, "out of view");
       }
       continue;
@@ -44,7 +50,7 @@ std::vector<PatchEvent> PatchMap::endFrame(long frame_index) {
     const bool stable =
         patch.area_in_view.size() > static_cast<std::size_t>(config_.stable_frames) &&
         area <= patch.area_in_view.front() * (1.0 + config_.max_growth);
-    if (!patch.finalized && settled && stable && area >= config_.min_area_m2)
+    if (!patch.finalized && settled && stable && largeEnough(patch, area))
       finalize(patch, events, "stable");
   }
   seen_this_frame_.clear();
@@ -104,7 +110,7 @@ std::vector<PatchEvent> PatchMap::finalizeAll() {
   std::vector<PatchEvent> events = std::move(pending_);
   pending_.clear();
   for (auto& [id, patch] : patches_) {
-    if (!patch.finalized && areaM2(patch) >= config_.min_area_m2) {
+    if (!patch.finalized && largeEnough(patch, areaM2(patch))) {
       finalize(patch, events, "end of stream");
     }
   }

@@ -359,6 +359,8 @@ class PatchMap {
   // The plane's tiles, in id order.
   std::vector<Patch*> tilesOf(const Plane& plane);
   void finalize(Patch& patch, std::vector<PatchEvent>& events, const char* reason) const;
+  // Whether a patch of this area is finalized (min_area_m2; a tile finalized before always).
+  bool largeEnough(const Patch& patch, double area_m2) const;
   // Loads a released patch's samples back (a region continues it).
   void restoreSamples(Patch& patch) const;
 

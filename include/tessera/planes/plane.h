@@ -82,6 +82,9 @@ struct Plane {
     // The in-plane move (u, v metres) corrections asked of the block and not yet made: its
     // tile moves once some block of it is owed enough to show.
     Eigen::Vector2f owed = Eigen::Vector2f::Zero();
+    // Cells move by whole cells, colour samples by the exact amount: the part of the moves made
+    // that the block's cells have not made yet (each axis within half a cell).
+    Eigen::Vector2f cell_lag = Eigen::Vector2f::Zero();
   };
   std::map<Cell, Block> blocks;  // by block (cell / kBlockCells, floored)
   static Cell blockOf(const Cell& cell);
