@@ -178,6 +178,22 @@ double wrongColourShare(const PatchMap& map, double x_lo, double x_hi) {
   return compared == 0 ? 1.0 : static_cast<double>(wrong) / static_cast<double>(compared);
 }
 
+// A wall fused from two keyframes side by side: three frames at x = 0 (keyframe stamps 1000 on),
+// then three at x = 1.8 m placed `drift_m` too far along the wall (stamps 5000 on). Returns the
+// next frame number.
+long seeWallFromTwoKeyframes(PatchMap& map, double drift_m) {
+  long frame = 0;
+  for (int i = 0; i < 3; ++i) {
+    seeWall(map, shifted(0.0, 0.0), shifted(0.0, 0.0), 1000 + i);
+    map.endFrame(frame++);
+  }
+  for (int i = 0; i < 3; ++i) {
+    seeWall(map, shifted(1.8, 0.0), shifted(1.8 + drift_m, 0.0), 5000 + i);
+    map.endFrame(frame++);
+  }
+  return frame;
+}
+
 // A wall fused from two keyframes side by side, the second placed 3 cm too far along the wall
 // (drift along it, which moving the plane cannot show). The correction moves the second
 // keyframe 3 cm back: the plane as a whole moves by the mean, about 1.5 cm, and each half's
@@ -185,14 +201,7 @@ double wrongColourShare(const PatchMap& map, double x_lo, double x_hi) {
 // where the wall has them.
 TEST(PatchCorrection, CellsMoveWithinThePlaneByTheirOwnKeyframesCorrection) {
   PatchMap map(quickConfig());
-  for (int i = 0; i < 3; ++i) {
-    seeWall(map, shifted(0.0, 0.0), shifted(0.0, 0.0), 1000 + i);
-    map.endFrame(i);
-  }
-  for (int i = 0; i < 3; ++i) {
-    seeWall(map, shifted(1.8, 0.0), shifted(1.83, 0.0), 5000 + i);
-    map.endFrame(3 + i);
-  }
+  seeWallFromTwoKeyframes(map, 0.03);
   ASSERT_EQ(map.patches().size(), 1u) << "the two views should make one wall";
   ASSERT_EQ(map.planes().size(), 1u);
   EXPECT_GT(map.planes().begin()->second.blocks.size(), 100u);
@@ -225,15 +234,7 @@ TEST(PatchCorrection, CellsMoveWithinThePlaneByTheirOwnKeyframesCorrection) {
 // textures it once.
 TEST(PatchCorrection, SmallMovesWithinThePlaneAddUpAndTheNewVersionWaitsForTheBurstToEnd) {
   PatchMap map(quickConfig());
-  long frame = 0;
-  for (int i = 0; i < 3; ++i) {
-    seeWall(map, shifted(0.0, 0.0), shifted(0.0, 0.0), 1000 + i);
-    map.endFrame(frame++);
-  }
-  for (int i = 0; i < 3; ++i) {
-    seeWall(map, shifted(1.8, 0.0), shifted(1.83, 0.0), 5000 + i);
-    map.endFrame(frame++);
-  }
+  long frame = seeWallFromTwoKeyframes(map, 0.03);
   std::vector<PatchEvent> events = map.finalizeAll();
   ASSERT_EQ(finalizedIds(events).size(), 1u);
   const auto back_by = [](double x) {
@@ -289,15 +290,7 @@ double samplesOffTheirCells(const PatchMap& map, double cell_m) {
 // the wall has them and the cells still lie under them (their lag within half a cell).
 TEST(PatchCorrection, ManySmallCorrectionsKeepTheCellsUnderTheirColours) {
   PatchMap map(quickConfig());
-  long frame = 0;
-  for (int i = 0; i < 3; ++i) {
-    seeWall(map, shifted(0.0, 0.0), shifted(0.0, 0.0), 1000 + i);
-    map.endFrame(frame++);
-  }
-  for (int i = 0; i < 3; ++i) {
-    seeWall(map, shifted(1.8, 0.0), shifted(1.896, 0.0), 5000 + i);
-    map.endFrame(frame++);
-  }
+  seeWallFromTwoKeyframes(map, 0.096);
   ASSERT_EQ(map.patches().size(), 1u);
   const double cell_m = quickConfig().cell_m;
   EXPECT_LT(samplesOffTheirCells(map, cell_m), 0.001);
