@@ -23,7 +23,7 @@ TIMING_KEYS = {
     "describe_queued_ms_p95", "commit_queued_ms_p50", "commit_queued_ms_p95", "db_commit_ms_p50",
     "db_commit_ms_p95", "match_ms_p50", "bitmap_ms_per_m2", "pose_graph_ms", "loop_keyframe_ms",
     "loop_keyframe_cpu_ms", "loop_information_ms", "loop_place_lookup_ms", "loop_place_index_ms",
-    "loop_verification_ms", "loop_follow_ms", "loop_wait_s", "stages", "db", "source", "cpu_s_stream", "cpu_ms_per_frame",
+    "loop_verification_ms", "loop_follow_ms", "loop_follow_frame_ms_max", "loop_wait_s", "stages", "db", "source", "cpu_s_stream", "cpu_ms_per_frame",
     "cpu_cores_stream", "cpu_s_end_of_stream", "cpu_s_finish", "cpu_s_total",
 }
 

@@ -122,6 +122,7 @@ void PlaneFigures::addTo(json& report) const {
   report["loop_planes_merged"] = loop_planes_merged;
   report["loop_tiles_moved_within_planes"] = loop_tiles_moved_within_planes;
   report["loop_follow_ms"] = loop_follow_ms;
+  report["loop_follow_frame_ms_max"] = loop_follow_frame_ms_max;
 }
 
 void BitmapFigures::addTo(json& report) const {

@@ -522,25 +522,49 @@ PlaneFigures PlaneStage::figures() const {
 
 void PlaneStage::followLoopClosure(std::shared_ptr<const loop::MapCorrection> newest) {
   if (!follows_loops_) return;
-  if (!newest || (loop_correction_ && newest->generation == loop_correction_->generation)) return;
+  if (!newest || (loop_correction_ && newest->generation == loop_correction_->generation)) {
+    if (map_.withinPlaneMovesPending()) continueMovesWithinPlanes();
+    return;
+  }
   loop_correction_ = std::move(newest);
   const auto start = std::chrono::steady_clock::now();
   const std::size_t tiles_before = map_.tilesMovedWithinPlanes();
   const std::size_t moved = map_.followCorrection(
       [this](std::int64_t keyframe_ns) { return loop_correction_->at(keyframe_ns); });
   const std::size_t merged = map_.mergeCoinciding();
-  const double ms =
-      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+  const double ms = countFollowMs(start);
   const std::size_t tiles = map_.tilesMovedWithinPlanes() - tiles_before;
   ++figures_.loop_corrections_followed;
   figures_.loop_planes_moved += moved;
   figures_.loop_planes_merged += merged;
   figures_.loop_tiles_moved_within_planes += tiles;
-  figures_.loop_follow_ms += ms;
   spdlog::info(
       "loop closure: the map followed optimisation {}: {} planes moved ({} tiles within their "
-      "plane), {} merged, in {:.0f} ms",
-      loop_correction_->generation, moved, tiles, merged, ms);
+      "plane{}), {} merged, in {:.0f} ms",
+      loop_correction_->generation, moved, tiles,
+      map_.withinPlaneMovesPending() ? ", more over the next frames" : "", merged, ms);
+}
+
+void PlaneStage::continueMovesWithinPlanes() {
+  const auto start = std::chrono::steady_clock::now();
+  const std::size_t tiles = map_.moveWithinPlanes();
+  // The moved planes may now continue older ones, as after the correction itself.
+  const std::size_t merged = map_.withinPlaneMovesPending() ? 0 : map_.mergeCoinciding();
+  const double ms = countFollowMs(start);
+  figures_.loop_planes_merged += merged;
+  figures_.loop_tiles_moved_within_planes += tiles;
+  spdlog::debug(
+      "loop closure: {} more tiles moved within their planes, {} planes merged, in "
+      "{:.0f} ms",
+      tiles, merged, ms);
+}
+
+double PlaneStage::countFollowMs(std::chrono::steady_clock::time_point start) {
+  const double ms =
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+  figures_.loop_follow_ms += ms;
+  figures_.loop_follow_frame_ms_max = std::max(figures_.loop_follow_frame_ms_max, ms);
+  return ms;
 }
 
 core::Isometry PlaneStage::loopMotion(std::int64_t keyframe_ns) const {
@@ -550,6 +574,7 @@ core::Isometry PlaneStage::loopMotion(std::int64_t keyframe_ns) const {
 std::vector<planes::PatchEvent> PlaneStage::finishStream(
     std::shared_ptr<const loop::MapCorrection> last_correction) {
   followLoopClosure(std::move(last_correction));
+  while (follows_loops_ && map_.withinPlaneMovesPending()) continueMovesWithinPlanes();
   return finish();
 }
 

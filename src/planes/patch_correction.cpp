@@ -22,6 +22,11 @@ namespace {
 constexpr double kMinMove_m = 0.002;
 constexpr double kMinTurn_deg = 0.05;
 
+// The centre, in the plane's (u, v), of the square `key` of a grid of `side_m` squares.
+Eigen::Vector2d squareCentre(const Cell& key, double side_m) {
+  return {(key.first + 0.5) * side_m, (key.second + 0.5) * side_m};
+}
+
 }  // namespace
 
 std::size_t PatchMap::followCorrection(
@@ -57,44 +62,41 @@ std::size_t PatchMap::followCorrection(
     motion.linear() = R;
     motion.translation() = centroid + shift / weight - R * centroid;
     plane.move(motion);
-    moveWithinPlane(plane, motion, steps);
+    if (oweWithinPlane(plane, motion, steps)) moving_planes_.insert(plane_id);
     ++moved_planes;
   }
+  moveWithinPlanes();
   return moved_planes;
 }
 
-bool PatchMap::moveWithinPlane(Plane& plane, const core::Isometry& plane_motion,
-                               const std::map<std::int64_t, core::Isometry>& steps) {
+std::size_t PatchMap::moveWithinPlanes() {
+  const auto most = static_cast<std::size_t>(std::max(0, config_.max_tiles_moved_per_frame));
+  std::size_t moved = 0;
+  while (!moving_planes_.empty() && (most == 0 || moved < most)) {
+    moved += movePendingTiles(*moving_planes_.begin());
+  }
+  return moved;
+}
+
+std::size_t PatchMap::movePendingTiles(int plane_id) {
+  if (moving_planes_.erase(plane_id) == 0) return 0;
+  const auto plane = planes_.find(plane_id);
+  return plane != planes_.end() ? moveDueTiles(plane->second) : 0;
+}
+
+bool PatchMap::oweWithinPlane(Plane& plane, const core::Isometry& plane_motion,
+                              const std::map<std::int64_t, core::Isometry>& steps) {
   if (!config_.move_within_plane || plane.blocks.empty()) return false;
   // The plane's frame has moved with it; a block at (u, v) was at `back * moved` before.
   const PlaneGeometry& now = *plane.geometry;
   const core::Isometry back = plane_motion.inverse();
-  const double cell_m = config_.cell_m, block_m = Plane::kBlockCells * cell_m;
-  const auto centreOf = [&](const Cell& key, double side_m) {
-    return Eigen::Vector2d((key.first + 0.5) * side_m, (key.second + 0.5) * side_m);
-  };
-  const auto cellAt = [&](const Eigen::Vector2d& uv) {
-    return Cell{static_cast<int>(std::floor(uv.x() / cell_m)),
-                static_cast<int>(std::floor(uv.y() / cell_m))};
-  };
+  const double block_m = Plane::kBlockCells * config_.cell_m;
   // Each block is owed, besides what earlier corrections left, where its keyframes' moves take
   // its centre (their mean, weighted by points) less where the plane's move took it, within
   // the plane.
-  // A block may straddle two tiles (a tile's edge need not fall on the block grid): it is due
-  // in the tiles of each of its cells.
-  const auto tilesOfBlock = [&](const Cell& key) {
-    std::set<Cell> keys;
-    for (int du = 0; du < Plane::kBlockCells; ++du) {
-      for (int dv = 0; dv < Plane::kBlockCells; ++dv) {
-        keys.insert(plane.grid.keyOf(
-            {key.first * Plane::kBlockCells + du, key.second * Plane::kBlockCells + dv}));
-      }
-    }
-    return keys;
-  };
-  std::set<Cell> due_tiles;  // tiles with a block owed enough to show
+  bool due = false;
   for (auto& [key, block] : plane.blocks) {
-    const Eigen::Vector2d uv = centreOf(key, block_m);
+    const Eigen::Vector2d uv = squareCentre(key, block_m);
     const Eigen::Vector3d moved = now.origin + uv.x() * now.u_axis + uv.y() * now.v_axis;
     const Eigen::Vector3d was = back * moved;
     Eigen::Vector3d target = Eigen::Vector3d::Zero();
@@ -108,12 +110,37 @@ bool PatchMap::moveWithinPlane(Plane& plane, const core::Isometry& plane_motion,
     if (points <= 0.0) continue;
     const Eigen::Vector3d residual = target / points - moved;
     block.owed += Eigen::Vector2d(residual.dot(now.u_axis), residual.dot(now.v_axis)).cast<float>();
+    due = due || block.owed.norm() >= config_.min_move_within_plane_m;
+  }
+  return due;
+}
+
+std::size_t PatchMap::moveDueTiles(Plane& plane) {
+  const double cell_m = config_.cell_m, block_m = Plane::kBlockCells * cell_m;
+  const auto cellAt = [&](const Eigen::Vector2d& uv) {
+    return Cell{static_cast<int>(std::floor(uv.x() / cell_m)),
+                static_cast<int>(std::floor(uv.y() / cell_m))};
+  };
+  // A block may straddle two tiles (a tile's edge need not fall on the block grid): it is due
+  // in the tiles of each of its cells.
+  const auto tilesOfBlock = [&](const Cell& key) {
+    std::set<Cell> keys;
+    for (int du = 0; du < Plane::kBlockCells; ++du) {
+      for (int dv = 0; dv < Plane::kBlockCells; ++dv) {
+        keys.insert(plane.grid.keyOf(
+            {key.first * Plane::kBlockCells + du, key.second * Plane::kBlockCells + dv}));
+      }
+    }
+    return keys;
+  };
+  std::set<Cell> due_tiles;  // tiles with a block owed enough to show
+  for (const auto& [key, block] : plane.blocks) {
     if (block.owed.norm() >= config_.min_move_within_plane_m) {
       const std::set<Cell> keys = tilesOfBlock(key);
       due_tiles.insert(keys.begin(), keys.end());
     }
   }
-  if (due_tiles.empty()) return false;
+  if (due_tiles.empty()) return 0;
   // In a due tile every block moves by what it is owed (its samples exactly, its cells by whole
   // cells, the rest kept as its lag); the others wait for a later correction.
   struct Shift {
@@ -159,7 +186,7 @@ bool PatchMap::moveWithinPlane(Plane& plane, const core::Isometry& plane_motion,
     Patch& tile = patchWithId(id->second);
     restoreSamples(tile);
     for (const Cell& c : tile.cells) {
-      const Eigen::Vector2i by = shiftAt(centreOf(c, cell_m)).cells;
+      const Eigen::Vector2i by = shiftAt(squareCentre(c, cell_m)).cells;
       cells.push_back({{c.first + by.x(), c.second + by.y()}, &tile});
     }
     tile.cells.clear();
@@ -237,7 +264,7 @@ bool PatchMap::moveWithinPlane(Plane& plane, const core::Isometry& plane_motion,
       }
       continue;
     }
-    const Eigen::Vector2d centre = centreOf(key, block_m);
+    const Eigen::Vector2d centre = squareCentre(key, block_m);
     const Cell to = Plane::blockOf(cellAt(centre + shift->second.samples));
     for (const Plane::Source& source : block.sources) {
       plane.addSource(to, source.keyframe_ns, source.points);
@@ -260,7 +287,7 @@ bool PatchMap::moveWithinPlane(Plane& plane, const core::Isometry& plane_motion,
     plane.tiles.erase(tile.tile);
     patches_.erase(id);
   }
-  return true;
+  return due.size();
 }
 
 std::optional<std::pair<int, int>> PatchMap::findCoinciding() const {

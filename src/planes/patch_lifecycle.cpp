@@ -29,8 +29,9 @@ std::vector<PatchEvent> PatchMap::endFrame(long frame_index) {
   pending_.clear();
   for (auto& [id, patch] : patches_) {
     const double area = areaM2(patch);
-    const bool settled = patch.frames_to_settle == 0;
-    if (!settled) --patch.frames_to_settle;
+    // A tile of a plane whose moves within it are still to come is textured after them.
+    const bool settled = patch.frames_to_settle == 0 && moving_planes_.count(patch.plane) == 0;
+    if (patch.frames_to_settle > 0) --patch.frames_to_settle;
     if (seen_this_frame_.count(patch.id) == 0) {
       const bool gone_long = frame_index - patch.last_seen_frame >= config_.out_of_view_frames;
       if (!patch.finalized && settled && gone_long && largeEnough(patch, area)) {
@@ -107,6 +108,8 @@ void PatchMap::restoreSamples(Patch& patch) const {
 }
 
 std::vector<PatchEvent> PatchMap::finalizeAll() {
+  // Tiles still owed a move within their plane are textured where the correction puts them.
+  while (!moving_planes_.empty()) movePendingTiles(*moving_planes_.begin());
   std::vector<PatchEvent> events = std::move(pending_);
   pending_.clear();
   for (auto& [id, patch] : patches_) {

@@ -144,6 +144,9 @@ int PatchMap::placePoints(int plane_id, const std::vector<Eigen::Vector3d>& poin
 }
 
 std::set<int> PatchMap::mergePlane(int into_id, int from_id, std::vector<int>& ids) {
+  // Moves still owed within either plane are made first, in its own frame.
+  movePendingTiles(from_id);
+  movePendingTiles(into_id);
   std::set<int> took;
   std::vector<Patch> from;  // in id order
   for (const Patch* tile : tilesOf(planes_.at(from_id)))

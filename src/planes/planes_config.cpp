@@ -39,6 +39,7 @@ void readConfig(const core::ConfigSection& section, PatchMapConfig& config) {
   section.read("move_within_plane", config.move_within_plane);
   section.read("min_move_within_plane_m", config.min_move_within_plane_m);
   section.read("moved_settle_frames", config.moved_settle_frames);
+  section.read("max_tiles_moved_per_frame", config.max_tiles_moved_per_frame);
   section.read("cell_m", config.cell_m);
   section.read("stable_frames", config.stable_frames);
   section.read("max_growth", config.max_growth);
@@ -58,8 +59,9 @@ void readConfig(const core::ConfigSection& section, PatchMapConfig& config) {
     throw core::ConfigError(
         "patches: max_normal_angle_deg, max_offset_m and cell_m must be positive");
   }
-  if (config.moved_settle_frames < 0) {
-    throw core::ConfigError("patches: moved_settle_frames must be at least 0");
+  if (config.moved_settle_frames < 0 || config.max_tiles_moved_per_frame < 0) {
+    throw core::ConfigError(
+        "patches: moved_settle_frames and max_tiles_moved_per_frame must be at least 0");
   }
   if (config.min_move_within_plane_m <= 0.0) {
     throw core::ConfigError("patches: min_move_within_plane_m must be positive");

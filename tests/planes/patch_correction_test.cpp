@@ -19,14 +19,15 @@ PatchMapConfig quickConfig() {
   return config;
 }
 
-// The wall z = 1.5 seen by a camera truly at `T_true`, placed in the map from the tracked pose
-// `T_tracked` (drifted) moved by `loop_motion`, tracked after the keyframe at `keyframe_ns`, colours
-// included.
+// The wall z = wall_z (1.5) seen by a camera truly at `T_true`, placed in the map from the tracked
+// pose `T_tracked` (drifted) moved by `loop_motion`, tracked after the keyframe at `keyframe_ns`,
+// colours included.
 std::vector<int> seeWall(PatchMap& map, const core::Isometry& T_true,
                          const core::Isometry& T_tracked, std::int64_t keyframe_ns,
-                         const core::Isometry& loop_motion = core::Isometry::Identity()) {
+                         const core::Isometry& loop_motion = core::Isometry::Identity(),
+                         double wall_z = 1.5) {
   const core::Frame frame =
-      test::renderPlane(test::kinectIntrinsics(), T_true, Eigen::Vector3d::UnitZ(), 1.5);
+      test::renderPlane(test::kinectIntrinsics(), T_true, Eigen::Vector3d::UnitZ(), wall_z);
   const PlaneDetection detection = PlaneDetector(PlaneDetectorConfig{}).detect(frame);
   const core::Isometry T_map = loop_motion * T_tracked;
   std::vector<PlaneObservation> observations = observationsOf(frame, detection, T_map);
@@ -152,18 +153,20 @@ TEST(PatchCorrection, APieceOfABentPlaneMergesAtItsFarEndButNotNearItsCentroid) 
 
 // The share of points, 1 cm inside the edges of the checkerboard's 10 cm squares across the
 // wall z = 1.5 from x = x_lo to x_hi, whose colour in the map is not the wall's there.
-double wrongColourShare(const PatchMap& map, double x_lo, double x_hi) {
+double wrongColourShare(const PatchMap& map, double x_lo, double x_hi, double wall_z = 1.5) {
   std::size_t wrong = 0, compared = 0;
   for (double x = x_lo; x < x_hi; x += 0.1) {
     for (const double dx : {0.01, 0.09}) {
       for (double y = -0.45; y < 0.5; y += 0.1) {
-        const Eigen::Vector3d X(x + dx, y, 1.5);
-        const bool dark = (static_cast<long>(std::floor(X.x() * 10)) +
-                           static_cast<long>(std::floor(X.y() * 10)) + 15) %
-                              2 !=
-                          0;
+        const Eigen::Vector3d X(x + dx, y, wall_z);
+        const bool dark =
+            (static_cast<long>(std::floor(X.x() * 10)) + static_cast<long>(std::floor(X.y() * 10)) +
+             static_cast<long>(std::floor(X.z() * 10))) %
+                2 !=
+            0;
         for (const Patch& patch : map.patches()) {
           const PlaneGeometry& g = *patch.geometry;
+          if (std::abs((X - g.origin).dot(g.normal)) > 0.05) continue;  // another plane
           const auto colour =
               patch.samples->colourAt(static_cast<float>((X - g.origin).dot(g.u_axis)),
                                       static_cast<float>((X - g.origin).dot(g.v_axis)));
@@ -179,16 +182,18 @@ double wrongColourShare(const PatchMap& map, double x_lo, double x_hi) {
 }
 
 // A wall fused from two keyframes side by side: three frames at x = 0 (keyframe stamps 1000 on),
-// then three at x = 1.8 m placed `drift_m` too far along the wall (stamps 5000 on). Returns the
-// next frame number.
-long seeWallFromTwoKeyframes(PatchMap& map, double drift_m) {
-  long frame = 0;
+// then three at x = 1.8 m placed `drift_m` too far along the wall (stamps 5000 on), stamps
+// `stamp_offset` later, from frame `frame` on. Returns the next frame number.
+long seeWallFromTwoKeyframes(PatchMap& map, double drift_m, long frame = 0, double wall_z = 1.5,
+                             std::int64_t stamp_offset = 0) {
+  const core::Isometry same = core::Isometry::Identity();
   for (int i = 0; i < 3; ++i) {
-    seeWall(map, shifted(0.0, 0.0), shifted(0.0, 0.0), 1000 + i);
+    seeWall(map, shifted(0.0, 0.0), shifted(0.0, 0.0), 1000 + stamp_offset + i, same, wall_z);
     map.endFrame(frame++);
   }
   for (int i = 0; i < 3; ++i) {
-    seeWall(map, shifted(1.8, 0.0), shifted(1.8 + drift_m, 0.0), 5000 + i);
+    seeWall(map, shifted(1.8, 0.0), shifted(1.8 + drift_m, 0.0), 5000 + stamp_offset + i, same,
+            wall_z);
     map.endFrame(frame++);
   }
   return frame;
@@ -263,6 +268,46 @@ TEST(PatchCorrection, SmallMovesWithinThePlaneAddUpAndTheNewVersionWaitsForTheBu
   }
   ASSERT_EQ(finalized_at.size(), 1u);
   EXPECT_EQ(finalized_at.front() - moved_at, quickConfig().moved_settle_frames);
+}
+
+// Two walls a metre apart, each fused from two keyframes 3 cm apart (the far wall's two views
+// overlap more, so its check is where only the second saw it), corrected at once with at
+// most one tile moved a frame (patches.max_tiles_moved_per_frame): the first plane's tile moves
+// with the correction, the second's at the next frame's call, or, when the stream ends first,
+// before the end finalizes it.
+TEST(PatchCorrection, MovesWithinPlanesAreSpreadOverTheFramesAfterTheCorrection) {
+  PatchMapConfig config = quickConfig();
+  config.max_tiles_moved_per_frame = 1;
+  constexpr double kFarWall_z = 2.5;
+  const auto back = [](std::int64_t t) {
+    return t >= 5000 ? shifted(-0.03, 0.0) : core::Isometry::Identity();
+  };
+  for (const bool stream_ends : {false, true}) {
+    SCOPED_TRACE(stream_ends ? "the stream ends" : "the next frame");
+    PatchMap map(config);
+    const long frame = seeWallFromTwoKeyframes(map, 0.03);
+    seeWallFromTwoKeyframes(map, 0.03, frame, kFarWall_z, 100);
+    ASSERT_EQ(map.planes().size(), 2u);
+    ASSERT_GT(wrongColourShare(map, 1.0, 2.6), 0.4);
+    ASSERT_GT(wrongColourShare(map, 2.6, 3.4, kFarWall_z), 0.2);
+
+    EXPECT_EQ(map.followCorrection(back), 2u);
+    EXPECT_EQ(map.tilesMovedWithinPlanes(), 1u);
+    EXPECT_TRUE(map.withinPlaneMovesPending());
+    EXPECT_LT(wrongColourShare(map, 1.0, 2.6), 0.02);  // the near wall's plane came first
+    EXPECT_GT(wrongColourShare(map, 2.6, 3.4, kFarWall_z), 0.2);
+
+    if (stream_ends) {
+      EXPECT_EQ(finalizedIds(map.finalizeAll()).size(), 2u);
+    } else {
+      EXPECT_EQ(map.moveWithinPlanes(), 1u);
+    }
+    EXPECT_FALSE(map.withinPlaneMovesPending());
+    EXPECT_EQ(map.tilesMovedWithinPlanes(), 2u);
+    EXPECT_LT(wrongColourShare(map, 1.0, 2.6), 0.02);
+    EXPECT_LT(wrongColourShare(map, 2.6, 3.4, kFarWall_z), 0.02);
+    EXPECT_EQ(map.moveWithinPlanes(), 0u);
+  }
 }
 
 // The share of colour samples that lie outside their tile's cells (beyond one cell's margin).

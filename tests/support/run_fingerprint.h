@@ -76,6 +76,7 @@ inline std::string runFingerprint(const std::filesystem::path& run_dir) {
                              "loop_place_index_ms",
                              "loop_verification_ms",
                              "loop_follow_ms",
+                             "loop_follow_frame_ms_max",
                              "loop_wait_s",
                              "stages",
                              "db",

@@ -136,6 +136,7 @@ struct PlaneFigures {
   // the plane stage's time following corrections, in all.
   std::size_t loop_tiles_moved_within_planes = 0;
   double loop_follow_ms = 0.0;
+  double loop_follow_frame_ms_max = 0.0;  // the most it took between two frames
   void addTo(nlohmann::json& report) const;
 };
 

@@ -3,6 +3,7 @@
 // They know nothing of TBB: flow_graph.h wires them. Each stage is called from one node of the
 // graph (a serial node, unless it says it is thread-safe), so none of them locks.
 #include <atomic>
+#include <chrono>
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
@@ -269,6 +270,11 @@ class PlaneStage {
   void count(const std::vector<planes::PatchEvent>& events);
   // Moves the map with `newest`, unless it is the correction it follows already.
   void followLoopClosure(std::shared_ptr<const loop::MapCorrection> newest);
+  // Moves within planes a correction left for the frames after it (patches.
+  // max_tiles_moved_per_frame), then merges what now coincides once none are left.
+  void continueMovesWithinPlanes();
+  // Adds the time since `start` to the figures of following corrections; returns it.
+  double countFollowMs(std::chrono::steady_clock::time_point start);
   // The loop-closure motion of the keyframe at `keyframe_ns` (identity before any).
   core::Isometry loopMotion(std::int64_t keyframe_ns) const;
   std::vector<planes::PatchSnapshot> snapshotsOf(

@@ -54,6 +54,10 @@ struct PatchMapConfig {
   // A tile moved within its plane is finalized again (textured anew) no sooner than this many
   // frames after its last move: the optimisations of loop closures come in bursts.
   int moved_settle_frames = 300;
+  // At most this many tiles move within their planes per frame (0: every due tile at once):
+  // a correction that moves many tiles is spread over the next frames (moveWithinPlanes), so
+  // that no frame waits on all of it.
+  int max_tiles_moved_per_frame = 0;
   double cell_m = 0.05;               // occupancy grid cell in the plane
   // Finalization: a patch in view is stable once its area grew by at most max_growth (a
   // fraction) over its last stable_frames frames in view; a patch not seen for
@@ -273,9 +277,16 @@ class PatchMap {
   // motion_at(keyframe) * (the motion they were placed with)^-1. A plane stays a plane, so it
   // moves by the mean of its keyframes' moves, weighted by how many points each gave, about
   // its centroid; with move_within_plane each block's cells and samples then move within it by
-  // the rest of their own keyframes' moves (moveWithinPlane). Returns how many planes moved.
+  // the rest of their own keyframes' moves (moveWithinPlanes, which it starts). Returns how many
+  // planes moved.
   std::size_t followCorrection(
       const std::function<core::Isometry(std::int64_t keyframe_ns)>& motion_at);
+  // Moves the due tiles of the planes whose within-plane moves are still pending, plane by
+  // plane, until max_tiles_moved_per_frame tiles have moved (at least one plane; 0: all).
+  // followCorrection starts it; call it once a frame, before the frame's points, until no
+  // move is pending. Returns how many tiles moved.
+  std::size_t moveWithinPlanes();
+  bool withinPlaneMovesPending() const { return !moving_planes_.empty(); }
   // Merges each plane into an older one it now continues (the association bounds, touching
   // its cells): a place mapped twice before the loop closed. The tiles that took cells or
   // colours grow a new version (finalized again once stable or out of view, from the merged
@@ -339,12 +350,17 @@ class PatchMap {
   // that got most of them.
   int placePoints(int plane_id, const std::vector<Eigen::Vector3d>& points,
                   const PointMoments& moments, std::optional<std::int64_t> keyframe_ns);
-  // After plane `plane` moved by `plane_motion` (followCorrection): each block's cells and
-  // samples move within the plane by where its keyframes' own moves (`steps`, by keyframe
-  // time) take it, less where the plane's move took it. The tiles whose content moved grow a
-  // new version. Returns whether any did.
-  bool moveWithinPlane(Plane& plane, const core::Isometry& plane_motion,
-                       const std::map<std::int64_t, core::Isometry>& steps);
+  // After plane `plane` moved by `plane_motion` (followCorrection): each block is owed, within
+  // the plane, where its keyframes' own moves (`steps`, by keyframe time) take it, less where
+  // the plane's move took it. Returns whether some tile is now due (moveDueTiles).
+  bool oweWithinPlane(Plane& plane, const core::Isometry& plane_motion,
+                      const std::map<std::int64_t, core::Isometry>& steps);
+  // Moves the tiles of `plane` with a block owed at least min_move_within_plane_m (and every
+  // tile such a block reaches): cells and samples by what their blocks are owed. Returns how
+  // many tiles moved.
+  std::size_t moveDueTiles(Plane& plane);
+  // moveDueTiles for plane `plane_id` if its moves are pending (and no longer after).
+  std::size_t movePendingTiles(int plane_id);
   // Moves every tile of plane `from_id` (cells, samples) into plane `into_id`'s tiles; the
   // tiles moved are gone, and ids handed out for them become the tiles that took them.
   // Returns the ids of the tiles that took cells or samples.
@@ -367,6 +383,7 @@ class PatchMap {
   PatchMapConfig config_;
   std::map<int, Patch> patches_;  // the tiles, by patch id
   std::size_t tiles_moved_within_planes_ = 0;
+  std::set<int> moving_planes_;   // plane ids with tiles due to move within them
   std::map<int, Plane> planes_;   // by plane id
   std::set<int> seen_this_frame_;
   std::set<int> set_aside_;          // plane ids (setAsideAll)
