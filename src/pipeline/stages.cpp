@@ -531,7 +531,9 @@ void PlaneStage::followLoopClosure(std::shared_ptr<const loop::MapCorrection> ne
   const std::size_t tiles_before = map_.tilesMovedWithinPlanes();
   const std::size_t moved = map_.followCorrection(
       [this](std::int64_t keyframe_ns) { return loop_correction_->at(keyframe_ns); });
-  const std::size_t merged = map_.mergeCoinciding();
+  // Planes that now coincide merge once every move within them is made, as below when some
+  // are left for the next frames.
+  const std::size_t merged = map_.withinPlaneMovesPending() ? 0 : map_.mergeCoinciding();
   const double ms = countFollowMs(start);
   const std::size_t tiles = map_.tilesMovedWithinPlanes() - tiles_before;
   ++figures_.loop_corrections_followed;
@@ -548,15 +550,15 @@ void PlaneStage::followLoopClosure(std::shared_ptr<const loop::MapCorrection> ne
 void PlaneStage::continueMovesWithinPlanes() {
   const auto start = std::chrono::steady_clock::now();
   const std::size_t tiles = map_.moveWithinPlanes();
-  // The moved planes may now continue older ones, as after the correction itself.
+  // The moved planes may now continue older ones.
   const std::size_t merged = map_.withinPlaneMovesPending() ? 0 : map_.mergeCoinciding();
   const double ms = countFollowMs(start);
   figures_.loop_planes_merged += merged;
   figures_.loop_tiles_moved_within_planes += tiles;
   spdlog::debug(
       "loop closure: {} more tiles moved within their planes, {} planes merged, in "
-      "{:.0f} ms",
-      tiles, merged, ms);
+      "{:.0f} ms{}",
+      tiles, merged, ms, map_.withinPlaneMovesPending() ? "" : " (all moved)");
 }
 
 double PlaneStage::countFollowMs(std::chrono::steady_clock::time_point start) {

@@ -57,7 +57,7 @@ struct PatchMapConfig {
   // At most this many tiles move within their planes per frame (0: every due tile at once):
   // a correction that moves many tiles is spread over the next frames (moveWithinPlanes), so
   // that no frame waits on all of it.
-  int max_tiles_moved_per_frame = 0;
+  int max_tiles_moved_per_frame = 2;
   double cell_m = 0.05;               // occupancy grid cell in the plane
   // Finalization: a patch in view is stable once its area grew by at most max_growth (a
   // fraction) over its last stable_frames frames in view; a patch not seen for
