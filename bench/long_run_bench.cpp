@@ -107,8 +107,11 @@ int main(int argc, char** argv) {
   app.add_option("--out", out_dir, "Output folder of the run");
   app.add_option("--poses", poses, "track (odometry) or gt (ground-truth poses)")
       ->check(CLI::IsMember({"track", "gt"}));
+  std::string log_level = "warn";
+  app.add_option("--log-level", log_level, "The run's log on stderr, as tessera --log-level")
+      ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error", "off"}));
   CLI11_PARSE(app, argc, argv);
-  tessera::core::initLogging("warn");
+  tessera::core::initLogging(log_level);
 
   try {
     LapSource source(source_path, laps);
