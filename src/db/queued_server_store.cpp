@@ -1,6 +1,7 @@
 #include "internal/queued_server_store.h"
 
 #include <algorithm>
+#include <atomic>
 #include <map>
 #include <system_error>
 
@@ -295,10 +296,14 @@ std::unique_ptr<TextureStore> queueWhileAway(std::unique_ptr<TextureStore> serve
                                              const OpenOptions& options) {
   std::filesystem::path journal = options.journal;
   if (journal.empty()) {
+    // Process, time and a count: stores opened by one process in the same millisecond (a
+    // fleet's writers in one test, say) each get a journal of their own.
+    static std::atomic<int> opened{0};
     const auto now = std::chrono::system_clock::now().time_since_epoch();
-    journal = std::filesystem::temp_directory_path() /
-              fmt::format("tessera-journal-{}-{}.sqlite", ::getpid(),
-                          std::chrono::duration_cast<std::chrono::milliseconds>(now).count());
+    journal =
+        std::filesystem::temp_directory_path() /
+        fmt::format("tessera-journal-{}-{}-{}.sqlite", ::getpid(),
+                    std::chrono::duration_cast<std::chrono::milliseconds>(now).count(), opened++);
   }
   return std::make_unique<internal::QueuedServerStore>(std::move(server), journal, options);
 }
