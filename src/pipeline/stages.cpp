@@ -517,6 +517,7 @@ PlaneFigures PlaneStage::figures() const {
   for (const planes::Patch& patch : map_.patches()) figures.colour_samples += patch.samples->size();
   figures.colour_sample_bytes = colourSampleBytes();
   figures.samples_released = map_.samplesReleased();
+  figures.loop_tiles_moved_within_planes = map_.tilesMovedWithinPlanes();
   return figures;
 }
 
@@ -539,7 +540,6 @@ void PlaneStage::followLoopClosure(std::shared_ptr<const loop::MapCorrection> ne
   ++figures_.loop_corrections_followed;
   figures_.loop_planes_moved += moved;
   figures_.loop_planes_merged += merged;
-  figures_.loop_tiles_moved_within_planes += tiles;
   spdlog::info(
       "loop closure: the map followed optimisation {}: {} planes moved ({} tiles within their "
       "plane{}), {} merged, in {:.0f} ms",
@@ -554,7 +554,6 @@ void PlaneStage::continueMovesWithinPlanes() {
   const std::size_t merged = map_.withinPlaneMovesPending() ? 0 : map_.mergeCoinciding();
   const double ms = countFollowMs(start);
   figures_.loop_planes_merged += merged;
-  figures_.loop_tiles_moved_within_planes += tiles;
   spdlog::debug(
       "loop closure: {} more tiles moved within their planes, {} planes merged, in "
       "{:.0f} ms{}",

@@ -1,5 +1,6 @@
 // PatchMap's patch lifecycle: finalization when a patch stops growing or leaves the view, and
 // colour samples moved out of memory while a finalized patch is out of view.
+#include <chrono>
 #include <filesystem>
 
 #include <fmt/format.h>
@@ -98,7 +99,13 @@ std::size_t PatchMap::releaseIdleSamples(long frame_index) {
 void PatchMap::restoreSamples(Patch& patch) const {
   if (!patch.spilled_samples) return;
   try {
+    const auto start = std::chrono::steady_clock::now();
     patch.samples = ColourSamples::load(*patch.spilled_samples);
+    spdlog::debug(
+        "patch {}: colour samples read back ({:.1f} MB) in {:.0f} ms", patch.id,
+        static_cast<double>(patch.samples->bytes()) / 1e6,
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
+            .count());
   } catch (const core::Error& e) {  // the patch goes on with the samples it gets from now
     spdlog::error("patch {}: {}; its earlier colours are lost", patch.id, e.what());
   }

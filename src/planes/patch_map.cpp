@@ -264,9 +264,16 @@ std::vector<int> PatchMap::add(const std::vector<PlaneObservation>& observations
       tileAt(created.id, {0, 0});  // its first tile, which holds the whole plane until it is cut
       planes.push_back(created.id);
     }
-    // The region joins every plane it continues: they were parts of one plane.
+    // The region joins every plane it continues: they were parts of one plane. Not while one
+    // of them still waits for moves within it (a correction's, spread over frames): merging
+    // now would make them all in this frame. They merge once moved (mergeCoinciding, or a
+    // later region).
     const int kept = planes.front();
-    for (std::size_t m = planes.size(); m-- > 1;) mergePlane(kept, planes[m], ids);
+    const bool moves_pending = std::any_of(planes.begin(), planes.end(),
+                                           [this](int id) { return moving_planes_.count(id) > 0; });
+    for (std::size_t m = planes.size(); m-- > 1 && !moves_pending;) {
+      mergePlane(kept, planes[m], ids);
+    }
     ids.push_back(placePoints(kept, observation.points_W, moments, observation.keyframe_ns));
     if (observation.keyframe_ns) {
       Plane::Observer& observer = planes_.at(kept).observers[*observation.keyframe_ns];
