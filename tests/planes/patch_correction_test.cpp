@@ -310,6 +310,54 @@ TEST(PatchCorrection, MovesWithinPlanesAreSpreadOverTheFramesAfterTheCorrection)
   }
 }
 
+// A region that continues two planes merges them, but not while one of them still waits for
+// moves within it (that would make all its moves in that frame): the doubled wall's planes
+// merge once the moves are made. A far wall (the first plane) takes the frame's budget.
+TEST(PatchCorrection, ARegionDoesNotMergePlanesWhileTheirMovesWait) {
+  PatchMapConfig config = quickConfig();
+  config.max_tiles_moved_per_frame = 1;
+  PatchMap map(config);
+  constexpr double kFarWall_z = 2.5;
+  long frame = seeWallFromTwoKeyframes(map, 0.03, 0, kFarWall_z, 100);  // plane 1: 1100.., 5100..
+  // Plane 2: the near wall from keyframes 2000.. at x = 0 and 3000.. at x = 1.8, placed 3 cm
+  // too far along it; plane 3: the same wall seen again from keyframes 7000.. placed 10 cm too
+  // far along its normal (the place mapped twice).
+  for (int i = 0; i < 3; ++i) {
+    seeWall(map, shifted(0.0, 0.0), shifted(0.0, 0.0), 2000 + i);
+    map.endFrame(frame++);
+  }
+  for (int i = 0; i < 3; ++i) {
+    seeWall(map, shifted(1.8, 0.0), shifted(1.83, 0.0), 3000 + i);
+    map.endFrame(frame++);
+  }
+  for (int i = 0; i < 3; ++i) {
+    seeWall(map, shifted(0.4, 0.0), shifted(0.4, 0.1), 7000 + i);
+    map.endFrame(frame++);
+  }
+  ASSERT_EQ(map.planes().size(), 3u);
+  const auto motion_at = [](std::int64_t t) {
+    if (t >= 7000) return shifted(0.0, -0.1);
+    if (t >= 5000 || (t >= 3000 && t < 4000)) return shifted(-0.03, 0.0);
+    return core::Isometry::Identity();
+  };
+  map.followCorrection(motion_at);
+  ASSERT_TRUE(map.withinPlaneMovesPending()) << "the near wall's moves should wait";
+  const std::size_t moved = map.tilesMovedWithinPlanes();
+
+  // A frame from the corrected keyframe sees the place mapped twice: both planes continue.
+  seeWall(map, shifted(0.4, 0.0), shifted(0.4, 0.1), 7100, motion_at(7100));
+  map.endFrame(frame++);
+  EXPECT_EQ(map.planes().size(), 3u);
+  EXPECT_EQ(map.tilesMovedWithinPlanes(), moved);
+  EXPECT_TRUE(map.withinPlaneMovesPending());
+
+  EXPECT_GT(map.moveWithinPlanes(), 0u);
+  EXPECT_FALSE(map.withinPlaneMovesPending());
+  EXPECT_EQ(map.mergeCoinciding(), 1u);
+  EXPECT_EQ(map.planes().size(), 2u);
+  EXPECT_LT(wrongColourShare(map, 1.0, 2.6), 0.02);
+}
+
 // The share of colour samples that lie outside their tile's cells (beyond one cell's margin).
 double samplesOffTheirCells(const PatchMap& map, double cell_m) {
   std::size_t off = 0, all = 0;
