@@ -287,7 +287,8 @@ void MapSaver::forgetKeyframes(const std::vector<std::int64_t>& timestamps_ns) {
 
 void MapSaver::checkpoint(std::int64_t frame_index) {
   last_frame_ = frame_index;
-  if (not_found_ || checkpoint_every_s_ <= 0.0 ||
+  // Not while moves within planes wait (the saved map keeps no debts): a few frames later.
+  if (not_found_ || checkpoint_every_s_ <= 0.0 || planes_.map().withinPlaneMovesPending() ||
       std::chrono::duration<double>(std::chrono::steady_clock::now() - last_save_).count() <
           checkpoint_every_s_) {
     return;

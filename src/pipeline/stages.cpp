@@ -575,11 +575,13 @@ core::Isometry PlaneStage::loopMotion(std::int64_t keyframe_ns) const {
 std::vector<planes::PatchEvent> PlaneStage::finishStream(
     std::shared_ptr<const loop::MapCorrection> last_correction) {
   followLoopClosure(std::move(last_correction));
-  while (follows_loops_ && map_.withinPlaneMovesPending()) continueMovesWithinPlanes();
   return finish();
 }
 
 std::vector<planes::PatchEvent> PlaneStage::finish() {
+  // Moves a correction left for later are made, and what then coincides merges, before the
+  // last finalizations (an interrupted source ends here too).
+  while (map_.withinPlaneMovesPending()) continueMovesWithinPlanes();
   std::vector<planes::PatchEvent> events = map_.finalizeAll();
   count(events);
   return events;

@@ -73,12 +73,12 @@ std::size_t PatchMap::moveWithinPlanes() {
   const auto most = static_cast<std::size_t>(std::max(0, config_.max_tiles_moved_per_frame));
   std::size_t moved = 0;
   while (!moving_planes_.empty() && (most == 0 || moved < most)) {
-    moved += movePendingTiles(*moving_planes_.begin());
+    moved += finishMovesWithin(*moving_planes_.begin());
   }
   return moved;
 }
 
-std::size_t PatchMap::movePendingTiles(int plane_id) {
+std::size_t PatchMap::finishMovesWithin(int plane_id) {
   if (moving_planes_.erase(plane_id) == 0) return 0;
   const auto plane = planes_.find(plane_id);
   return plane != planes_.end() ? moveDueTiles(plane->second) : 0;

@@ -116,7 +116,7 @@ void PatchMap::restoreSamples(Patch& patch) const {
 
 std::vector<PatchEvent> PatchMap::finalizeAll() {
   // Tiles still owed a move within their plane are textured where the correction puts them.
-  while (!moving_planes_.empty()) movePendingTiles(*moving_planes_.begin());
+  while (!moving_planes_.empty()) finishMovesWithin(*moving_planes_.begin());
   std::vector<PatchEvent> events = std::move(pending_);
   pending_.clear();
   for (auto& [id, patch] : patches_) {

@@ -145,8 +145,8 @@ int PatchMap::placePoints(int plane_id, const std::vector<Eigen::Vector3d>& poin
 
 std::set<int> PatchMap::mergePlane(int into_id, int from_id, std::vector<int>& ids) {
   // Moves still owed within either plane are made first, in its own frame.
-  movePendingTiles(from_id);
-  movePendingTiles(into_id);
+  finishMovesWithin(from_id);
+  finishMovesWithin(into_id);
   std::set<int> took;
   std::vector<Patch> from;  // in id order
   for (const Patch* tile : tilesOf(planes_.at(from_id)))
@@ -265,10 +265,13 @@ std::vector<int> PatchMap::add(const std::vector<PlaneObservation>& observations
       planes.push_back(created.id);
     }
     // The region joins every plane it continues: they were parts of one plane. Not while one
-    // of them still waits for moves within it (a correction's, spread over frames): merging
-    // now would make them all in this frame. They merge once moved (mergeCoinciding, or a
-    // later region).
+    // of the others still waits for moves within it (a correction's, spread over frames):
+    // merging now would make all of them in this frame. They merge once moved
+    // (mergeCoinciding, or a later region).
     const int kept = planes.front();
+    // The plane the points go to makes its own waiting moves first: points placed at their
+    // corrected place must not then move by the debt of what was there before.
+    finishMovesWithin(kept);
     const bool moves_pending = std::any_of(planes.begin(), planes.end(),
                                            [this](int id) { return moving_planes_.count(id) > 0; });
     for (std::size_t m = planes.size(); m-- > 1 && !moves_pending;) {

@@ -234,6 +234,7 @@ void PatchMap::loadState(const std::filesystem::path& file,
   next_plane_id_ = next_plane_id;
   seen_this_frame_.clear();
   pending_.clear();
+  moving_planes_.clear();
 }
 
 std::size_t PatchMap::setAsideAll() {

@@ -238,8 +238,9 @@ class IntegrationStage {
 // Finds the planar regions of each posed frame, grows the patch map with them and their
 // colours, and finalizes patches that stopped growing or left the view. With loop closure
 // (`follows_loops`) the map follows each new correction the frames bring
-// (FusedFrame::loop_correction: PatchMap::followCorrection, then mergeCoinciding), and each
-// frame's points are placed with the correction of its keyframe.
+// (FusedFrame::loop_correction: PatchMap::followCorrection, its moves within planes spread
+// over the next frames, then mergeCoinciding), and each frame's points are placed with the
+// correction of its keyframe.
 class PlaneStage {
  public:
   PlaneStage(const planes::PlaneDetectorConfig& detector, const planes::PatchMapConfig& patches,

@@ -54,9 +54,9 @@ struct PatchMapConfig {
   // A tile moved within its plane is finalized again (textured anew) no sooner than this many
   // frames after its last move: the optimisations of loop closures come in bursts.
   int moved_settle_frames = 300;
-  // At most this many tiles move within their planes per frame (0: every due tile at once):
-  // a correction that moves many tiles is spread over the next frames (moveWithinPlanes), so
-  // that no frame waits on all of it.
+  // A correction's moves within planes are made plane by plane (a plane's due tiles all at
+  // once) until at least this many tiles have moved in a frame (0: all at once); the rest
+  // follow over the next frames (moveWithinPlanes), so that no frame waits on all of them.
   int max_tiles_moved_per_frame = 2;
   double cell_m = 0.05;               // occupancy grid cell in the plane
   // Finalization: a patch in view is stable once its area grew by at most max_growth (a
@@ -359,8 +359,8 @@ class PatchMap {
   // tile such a block reaches): cells and samples by what their blocks are owed. Returns how
   // many tiles moved.
   std::size_t moveDueTiles(Plane& plane);
-  // moveDueTiles for plane `plane_id` if its moves are pending (and no longer after).
-  std::size_t movePendingTiles(int plane_id);
+  // Makes the waiting moves of plane `plane_id`, if any (moveDueTiles); it waits no more.
+  std::size_t finishMovesWithin(int plane_id);
   // Moves every tile of plane `from_id` (cells, samples) into plane `into_id`'s tiles; the
   // tiles moved are gone, and ids handed out for them become the tiles that took them.
   // Returns the ids of the tiles that took cells or samples.
