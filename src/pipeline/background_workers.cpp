@@ -12,9 +12,13 @@
 
 namespace tessera::pipeline::internal {
 
-BackgroundWorkers::BackgroundWorkers(int threads, int nice) {
-  for (int i = 0; i < std::max(1, threads); ++i) {
-    threads_.emplace_back([this, nice] { work(nice); });
+BackgroundWorkers::BackgroundWorkers(int threads, int nice) : nice_(nice) {
+  growTo(std::max(1, threads));
+}
+
+void BackgroundWorkers::growTo(int threads) {
+  while (static_cast<int>(threads_.size()) < threads) {
+    threads_.emplace_back([this] { work(nice_); });
   }
 }
 

@@ -4,6 +4,7 @@
 #include <atomic>
 #include <chrono>
 #include <deque>
+#include <functional>
 #include <memory>
 #include <mutex>
 #include <thread>
@@ -138,6 +139,51 @@ class PatchBacklog {
   std::size_t waiting_bytes_ = 0, withheld_ = 0;
 };
 
+// The patches still live at the end of the stream, handed to texturing a few at a time: at
+// first `in_flight`, then one more as each is committed, so that the backlog's bound holds
+// at the end too (a long walk's process peak was once these jobs, when each held a copy of
+// its patch's colour samples) and no describing thread idles while another finishes a large
+// patch. Called from the end of the stream and from the report node.
+class EndOfStreamFeed {
+ public:
+  using HandOver = std::function<void(std::vector<int>)>;
+
+  void start(std::vector<int> ids, std::size_t in_flight, HandOver hand_over) {
+    const std::lock_guard lock(mutex_);
+    ids_ = std::move(ids);
+    in_flight_ = std::max<std::size_t>(1, in_flight);
+    hand_over_ = std::move(hand_over);
+    handLocked(in_flight_);
+  }
+  // A patch was committed: the next takes its place.
+  void oneCommitted() {
+    const std::lock_guard lock(mutex_);
+    handLocked(1);
+  }
+  // The graph went idle with patches left (a job that ended without a commit frees no
+  // place): the next few. False when none was left.
+  bool handMore() {
+    const std::lock_guard lock(mutex_);
+    return handLocked(in_flight_);
+  }
+
+ private:
+  bool handLocked(std::size_t count) {
+    if (next_ >= ids_.size() || !hand_over_) return false;
+    const std::size_t end = std::min(ids_.size(), next_ + count);
+    std::vector<int> some(ids_.begin() + static_cast<std::ptrdiff_t>(next_),
+                          ids_.begin() + static_cast<std::ptrdiff_t>(end));
+    next_ = end;
+    hand_over_(std::move(some));
+    return true;
+  }
+
+  std::mutex mutex_;
+  std::vector<int> ids_;
+  std::size_t next_ = 0, in_flight_ = 1;
+  HandOver hand_over_;
+};
+
 // Tells the graph that an async node's job is done (however it ended), so that
 // wait_for_all does not wait for it any more.
 template <class Gateway>
@@ -206,6 +252,7 @@ std::size_t runGraph(FramePath& frames, PatchPath& patches, RunReport& report,
     // The plane stage sends the frame on to the report and each patch it finalized (or
     // retired) to the patch path, numbered in the order it happened.
     PatchJobs jobs;
+    EndOfStreamFeed end_feed;  // idle until the end of the stream
     PatchBacklog backlog(static_cast<std::size_t>(std::max(1, options.max_patches_waiting)),
                          options.max_patch_bytes_waiting);
     auto queue = [&backlog](std::vector<JobMessage> batch, auto& to) {
@@ -265,6 +312,7 @@ std::size_t runGraph(FramePath& frames, PatchPath& patches, RunReport& report,
           if (message.tag() == 1) {
             if (const Committed& committed = flow::cast_to<Committed>(message)) {
               report.committed(*committed);
+              end_feed.oneCommitted();
             }
             places = backlog.jobDone();
           } else {
@@ -297,27 +345,24 @@ std::size_t runGraph(FramePath& frames, PatchPath& patches, RunReport& report,
     source_node.activate();
     graph.wait_for_all();
 
-    // End of stream: the patches still live are finalized and textured like the others. They
-    // are handed to texturing as the backlog allows, not all at once, so that its bound holds
-    // at the end too (the end finalizes many patches; a long walk's process peak was once
-    // these jobs, when each held a copy of its patch's colour samples).
+    // End of stream: the patches still live are finalized and textured like the others, as
+    // the backlog allows (EndOfStreamFeed). No frame needs a core any more, so every core
+    // describes (a loop closure near the end leaves most patches to texture here); the
+    // commit order, and so the result, stays the same.
     const std::vector<planes::PatchEvent> events = frames.finishStream();
+    describers.growTo(threads);
     report.patchEvents(events);
     queue(jobs.retired(events), describe_node);
     const std::vector<int> ids = planes::finalizedIds(events);
     jobs.openBatch(ids.size(), frames_reported);
-    const auto part = static_cast<std::size_t>(std::max(1, options.max_patches_waiting));
-    for (std::size_t first = 0; first < ids.size(); first += part) {
-      const std::vector<int> some(
-          ids.begin() + static_cast<std::ptrdiff_t>(first),
-          ids.begin() + static_cast<std::ptrdiff_t>(std::min(ids.size(), first + part)));
-      std::vector<planes::PatchSnapshot> finalized = frames.snapshots(some);
-      queue(jobs.inOpenBatch(finalized), describe_node);
-      // This part is textured and committed before the next is handed over (a describing
-      // thread may idle at its end).
-      graph.wait_for_all();
-    }
-    graph.wait_for_all();  // the retirements, when nothing was finalized
+    end_feed.start(ids, static_cast<std::size_t>(std::max(1, options.max_patches_waiting)),
+                   [&](std::vector<int> some) {
+                     std::vector<planes::PatchSnapshot> finalized = frames.snapshots(some);
+                     queue(jobs.inOpenBatch(finalized), describe_node);
+                   });
+    do {
+      graph.wait_for_all();  // the retirements too, when nothing was finalized
+    } while (end_feed.handMore());
   });
   describers.rethrowFirst();
   committer.rethrowFirst();

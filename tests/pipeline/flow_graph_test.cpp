@@ -4,7 +4,8 @@
 // called by two threads at once, and no more frames are in flight than the limiter allows;
 // texturing runs at a lower priority than the frame path, the frame path waits while too many
 // patches (or, live, too many bytes of their colour samples) wait for their textures, and a failure
-// to describe a patch ends the run with its error; for 1, 2 and 4 threads.
+// to describe a patch ends the run with its error; for 1, 2 and 4 threads. At the end of the
+// stream every thread describes, and the patches left are handed over as commits free places.
 #include "tessera/pipeline/flow_graph.h"
 
 #include <atomic>
@@ -105,6 +106,7 @@ class FakeFrames : public FramePath {
     return fused;
   }
   std::vector<planes::PatchEvent> finishStream() override {
+    stream_finished = true;
     std::vector<planes::PatchEvent> events{{planes::PatchEvent::Kind::kRetired, retired_, 1}};
     finalization_order.push_back(-retired_++);
     for (int i = 0; i < kFinalizedAtTheEnd; ++i) {
@@ -125,6 +127,7 @@ class FakeFrames : public FramePath {
 
   std::atomic<int> in_flight{0}, max_in_flight{0}, out_of_order{0}, track_nice{-100};
   std::atomic<bool> stream_read{false};  // the source said the stream ended
+  std::atomic<bool> stream_finished{false};  // finishStream was called
   std::vector<int> finalization_order;  // patch ids; a retirement as -id
   // Patch jobs (finalized and retired) queued and not yet committed, at most, when
   // `commits_done` counts the commits.
@@ -144,8 +147,9 @@ class FakePatches : public PatchPath {
  public:
   DescribedPatch describe(const PatchJob& job) const override {
     const int now = ++describing;
-    for (int most = max_describing;
-         now > most && !max_describing.compare_exchange_weak(most, now);) {
+    std::atomic<int>& at_most =
+        end_reached != nullptr && *end_reached ? max_describing_at_end : max_describing;
+    for (int most = at_most; now > most && !at_most.compare_exchange_weak(most, now);) {
     }
     std::mt19937 random(static_cast<unsigned>(job.sequence) + 7);
     nap(random, describe_max_us);  // many at once, finishing out of order
@@ -185,7 +189,10 @@ class FakePatches : public PatchPath {
   std::atomic<int> out_of_order{0};
   std::vector<int> commit_order;
   mutable std::atomic<int> describe_nice{-100};
-  mutable std::atomic<int> describing{0}, max_describing{0};  // patches being described
+  // Patches being described at once: now, at most during the stream, at most at its end
+  // (once `end_reached` is set).
+  mutable std::atomic<int> describing{0}, max_describing{0}, max_describing_at_end{0};
+  const std::atomic<bool>* end_reached = nullptr;
   std::atomic<int> commit_nice{-100}, commits_done{0};
   int fail_on_patch = -1;
   int describe_max_us = 3000;
@@ -246,6 +253,7 @@ class FlowGraphTest : public ::testing::TestWithParam<int> {};
 TEST_P(FlowGraphTest, KeepsOrderBatchesAndBackPressureAndFlushesAtTheEnd) {
   FakeFrames frames;
   FakePatches patches;
+  patches.end_reached = &frames.stream_finished;
   FakeReport report(frames);
   const int nice = threadNice();
   const std::size_t reported = runGraph(frames, patches, report, {GetParam(), kInFlight, 5});
@@ -257,6 +265,7 @@ TEST_P(FlowGraphTest, KeepsOrderBatchesAndBackPressureAndFlushesAtTheEnd) {
   EXPECT_EQ(report.overlaps, 0) << "two threads in the report at once";
   // Half the threads describe (at least one); the frame path keeps the other half.
   EXPECT_LE(patches.max_describing, std::max(1, GetParam() / 2));
+  EXPECT_LE(patches.max_describing_at_end, GetParam());
   // The source may hold one frame it read and the limiter has not admitted yet.
   EXPECT_LE(frames.max_in_flight, kInFlight + 1);
   EXPECT_EQ(frames.in_flight, 0);
@@ -282,8 +291,9 @@ TEST_P(FlowGraphTest, KeepsOrderBatchesAndBackPressureAndFlushesAtTheEnd) {
   EXPECT_EQ(report.batches.rbegin()->second.frame_index, static_cast<std::uint64_t>(kStreamFrames));
   EXPECT_EQ(report.batches.rbegin()->second.size,
             static_cast<std::size_t>(FakeFrames::kFinalizedAtTheEnd));
-  // The end's patches are copied (colour samples and all) as the backlog's bound (4) allows.
-  EXPECT_EQ(frames.end_parts, (std::vector<std::size_t>{4, 4, 2}));
+  // The end's patches are copied (colour samples and all) as the backlog's bound (4) allows:
+  // four, then one as each is committed.
+  EXPECT_EQ(frames.end_parts, (std::vector<std::size_t>{4, 1, 1, 1, 1, 1, 1}));
 
   // Texturing runs at a lower priority than the frame path.
   EXPECT_EQ(frames.track_nice, nice);
@@ -302,6 +312,20 @@ TEST(FlowGraph, DescribesOnAsManyThreadsAsAskedFor) {
   EXPECT_EQ(patches.commit_order, frames.finalization_order);
   EXPECT_LE(patches.max_describing, 3);
   EXPECT_GE(patches.max_describing, 2) << "the queued patches were described one at a time";
+}
+
+// Once the frames are over, the frame path's cores describe too.
+TEST(FlowGraph, EveryThreadDescribesAtTheEndOfTheStream) {
+  FakeFrames frames;
+  FakePatches patches;
+  patches.describe_max_us = 20'000;  // long enough for the end's patches to queue
+  patches.end_reached = &frames.stream_finished;
+  FakeReport report(frames);
+  EXPECT_EQ(runGraph(frames, patches, report, {2, kInFlight, 0}),
+            static_cast<std::size_t>(kStreamFrames));
+  EXPECT_EQ(patches.commit_order, frames.finalization_order);
+  EXPECT_EQ(patches.max_describing, 1);
+  EXPECT_EQ(patches.max_describing_at_end, 2);
 }
 
 TEST(FlowGraph, AFailureToDescribeAPatchEndsTheRunWithItsError) {

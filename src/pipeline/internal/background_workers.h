@@ -27,6 +27,8 @@ class BackgroundWorkers {
   void submit(std::function<void()> job);
   // Rethrows the first exception a job threw, if any.
   void rethrowFirst();
+  // Starts threads, at the same nice value, until there are `threads` (never fewer than now).
+  void growTo(int threads);
 
  private:
   void work(int nice);
@@ -36,6 +38,7 @@ class BackgroundWorkers {
   std::deque<std::function<void()>> jobs_;
   bool stopping_ = false;
   std::exception_ptr first_error_;
+  const int nice_;
   std::vector<std::thread> threads_;
 };
 
