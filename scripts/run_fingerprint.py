@@ -18,7 +18,7 @@ import sys
 # report.json keys that measure time or memory, or name where the run was: they differ between
 # two runs of the same binary.
 TIMING_KEYS = {
-    "wall_s", "fps", "peak_rss_mb", "rss_growth_mb_per_1000_frames", "latency_ms_p50",
+    "wall_s", "fps", "end_to_end_s", "fps_end_to_end", "peak_rss_mb", "rss_growth_mb_per_1000_frames", "latency_ms_p50",
     "latency_ms_p95", "commit_latency_ms_p50", "commit_latency_ms_p95", "describe_queued_ms_p50",
     "describe_queued_ms_p95", "commit_queued_ms_p50", "commit_queued_ms_p95", "db_commit_ms_p50",
     "db_commit_ms_p95", "match_ms_p50", "bitmap_ms_per_m2", "pose_graph_ms", "loop_keyframe_ms",

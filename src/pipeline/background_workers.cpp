@@ -44,18 +44,21 @@ void BackgroundWorkers::rethrowFirst() {
   if (first_error_) std::rethrow_exception(first_error_);
 }
 
-void BackgroundWorkers::work(int nice) {
-  if (nice != 0) {
-    // On Linux a thread's nice value is its own: the thread's id names it to setpriority. It
-    // starts at its creator's; raising it needs no privilege.
-    const auto tid = static_cast<id_t>(::syscall(SYS_gettid));
-    errno = 0;
-    const int own = ::getpriority(PRIO_PROCESS, tid);
-    if ((own == -1 && errno != 0) ||
-        ::setpriority(PRIO_PROCESS, tid, std::min(19, own + nice)) != 0) {
-      spdlog::debug("texturing threads keep the process's priority: {}", std::strerror(errno));
-    }
+void lowerOwnPriority(int nice) {
+  if (nice == 0) return;
+  // On Linux a thread's nice value is its own: the thread's id names it to setpriority. It
+  // starts at its creator's; raising it needs no privilege.
+  const auto tid = static_cast<id_t>(::syscall(SYS_gettid));
+  errno = 0;
+  const int own = ::getpriority(PRIO_PROCESS, tid);
+  if ((own == -1 && errno != 0) ||
+      ::setpriority(PRIO_PROCESS, tid, std::min(19, own + nice)) != 0) {
+    spdlog::debug("a background thread keeps the process's priority: {}", std::strerror(errno));
   }
+}
+
+void BackgroundWorkers::work(int nice) {
+  lowerOwnPriority(nice);
   for (;;) {
     std::function<void()> job;
     {

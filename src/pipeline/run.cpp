@@ -89,6 +89,7 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
   const double wall_s =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   const double cpu_graph_done_s = core::processCpuSeconds();
+  parts.surface.wait();  // the integration stage is the summary's again
 
   RunSummary summary = internal::summariseRun(parts, options, wall_s);
   std::vector<std::filesystem::path> files = internal::exportRun(parts, options, summary);
@@ -114,6 +115,8 @@ RunSummary runPipeline(core::FrameSource& source, const RunConfig& config,
     std::filesystem::remove_all(parts.sample_dir, ignored);
   }
   summary.peak_rss_mb = peakRssMb();
+  summary.end_to_end_s =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   summary.cpu.stream_s = summary.stream.cpu_stream_s;
   summary.cpu.elapsed_stream_s = summary.stream.elapsed_stream_s;
   summary.cpu.frames = summary.stream.frames;

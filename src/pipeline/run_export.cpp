@@ -63,46 +63,6 @@ reuse::Economy bindMapTextures(const db::TextureStore& store, const CommitStage&
   return reuse::economyOf(map);
 }
 
-// The TSDF's surface: fused again at the corrected poses when loop closure moved keyframes
-// (and the frames kept for it are there), else as fused.
-fusion::SurfaceMesh finalMesh(RunParts& parts, LoopFigures& loops) {
-  const fusion::ReintegrationLog* log = parts.integration.reintegrationLog();
-  if (log != nullptr) {
-    loops.tsdf_frames_kept = log->size();
-    loops.tsdf_frames_kept_bytes = log->diskBytes();
-  }
-  if (!parts.loop_closer || log == nullptr || log->size() == 0 ||
-      parts.loop_closer->graph().stats().optimisations == 0) {
-    return parts.integration.map().extractMesh();
-  }
-  if (!log->usable()) {
-    spdlog::warn("mesh.ply stays at the tracked poses: {}", log->error());
-    return parts.integration.map().extractMesh();
-  }
-  const auto start = std::chrono::steady_clock::now();
-  const loop::MapCorrection correction = parts.loop_closer->graph().correction();
-  // The surface at the tracked poses stays as the fallback; its volume (the run's largest
-  // store) is freed before the second volume is fused.
-  fusion::SurfaceMesh tracked = parts.integration.takeSurface();
-  try {
-    fusion::SurfaceMesh mesh =
-        log->rebuild(parts.integration.map().config(),
-                     [&correction](std::int64_t anchor_ns) -> std::optional<core::Isometry> {
-                       if (!correction.inMap(anchor_ns)) return std::nullopt;  // never joined
-                       return correction.at(anchor_ns);
-                     });
-    loops.tsdf_corrected = true;
-    loops.tsdf_correction_s =
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    spdlog::info("TSDF fused again at the corrected poses from {} keyframes in {:.1f} s",
-                 log->size(), loops.tsdf_correction_s);
-    return mesh;
-  } catch (const core::Error& e) {
-    spdlog::warn("mesh.ply stays at the tracked poses: {}", e.what());
-    return tracked;
-  }
-}
-
 }  // namespace
 
 std::vector<std::filesystem::path> exportRun(RunParts& parts, const RunOptions& options,
@@ -110,7 +70,7 @@ std::vector<std::filesystem::path> exportRun(RunParts& parts, const RunOptions& 
   std::vector<std::filesystem::path> written;
   const auto file = [&](const char* name) { return written.emplace_back(options.out_dir / name); };
   // The mesh is written even when the source ended abnormally, so work is kept.
-  fusion::SurfaceMesh mesh = finalMesh(parts, summary.loops);
+  fusion::SurfaceMesh mesh = parts.surface.take(summary.loops);
   const std::filesystem::path earlier_mesh = options.out_dir / "map" / "mesh.ply";
   if (options.continue_map && summary.tracking.continued_map_found_at_frame &&
       std::filesystem::is_regular_file(earlier_mesh)) {

@@ -63,10 +63,13 @@ RunParts::RunParts(core::FrameSource& input, const RunConfig& config, const RunO
                                        options.out_dir, store->location(), earlier,
                                        config.pipeline.checkpoint_every_s, planes, bitmaps, commit)
                                  : nullptr),
+      surface(
+          integration, loop_closer.get(),
+          input.isLive() ? config.pipeline.texture_nice_live : config.pipeline.texture_nice_replay),
       stages(source_stage, tracking, integration, planes, describe, commit, bitmaps, sink,
              loop_closer.get(), options.listener,
              {config.pipeline.return_freed_memory_s, config.pipeline.return_freed_memory_above_mb},
-             map_saver.get()) {
+             map_saver.get(), &surface) {
   planes.spillSamplesTo(sample_dir);
   if (loop_closer) tracking.followLoopClosure();
   if (loop_closer && config.loop_closure.hold_apart_unjoined_segments) {

@@ -4,6 +4,7 @@
 
 #include <spdlog/spdlog.h>
 
+#include "internal/corrected_surface.h"
 #include "internal/saved_map.h"
 #include "tessera/core/memory.h"
 
@@ -52,6 +53,7 @@ std::vector<planes::PatchEvent> RunStages::finishStream() {
   loop_closer_->finish();
   loop_wait_s_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   forgetCoveredKeyframes();
+  if (surface_ != nullptr) surface_->start();
   return planes_.finishStream(loop_closer_->correction());
 }
 

@@ -83,10 +83,15 @@ RunSummary summariseRun(RunParts& parts, const RunOptions& options, double wall_
 
 nlohmann::json reportJson(const RunSummary& summary) {
   using nlohmann::json;
-  json report = {{"source", summary.source},
-                 {"wall_s", summary.wall_s},
-                 {"fps", summary.fps},
-                 {"peak_rss_mb", summary.peak_rss_mb}};
+  json report = {
+      {"source", summary.source},
+      {"wall_s", summary.wall_s},
+      {"fps", summary.fps},
+      {"end_to_end_s", summary.end_to_end_s},
+      {"fps_end_to_end", summary.end_to_end_s > 0.0
+                             ? static_cast<double>(summary.stream.frames) / summary.end_to_end_s
+                             : 0.0},
+      {"peak_rss_mb", summary.peak_rss_mb}};
   summary.stream.addTo(report);
   summary.cpu.addTo(report);
   summary.input.addTo(report);

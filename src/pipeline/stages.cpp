@@ -338,13 +338,14 @@ void IntegrationStage::keepFramesForCorrection(const std::filesystem::path& dir)
 
 fusion::SurfaceMesh IntegrationStage::takeSurface() {
   fusion::SurfaceMesh surface = map_.extractMesh();
+  bytes_when_taken_ = map_.memoryBytes();
   map_.clear();
   return surface;
 }
 
 IntegrationFigures IntegrationStage::figures() const {
   IntegrationFigures figures = figures_;
-  figures.tsdf_bytes = map_.memoryBytes();
+  figures.tsdf_bytes = bytes_when_taken_ ? *bytes_when_taken_ : map_.memoryBytes();
   return figures;
 }
 

@@ -421,6 +421,34 @@ TEST(Pipeline, TracksTheRealFastRotatingTumSequenceWithinOneCentimetre) {
   EXPECT_EQ(report["tracking_losses"], 0);
 }
 
+// The BundleFusion apartment's keyframes, tracked: loop closure moves keyframes, and the TSDF
+// is fused again at the corrected poses on a thread of its own while the last patches are
+// textured. The mesh written is that one, and the report keeps the TSDF's size from before
+// its volume was freed.
+TEST(Pipeline, ALoopCorrectedRunFusesItsTsdfAgainBesideTheLastTextures) {
+  TESSERA_REQUIRE_SHARED("rgbd/bundlefusion_apt0_kf219");
+  drivers::DatasetOptions dataset;
+  dataset.depth_units_per_m = 1000.0;
+  drivers::DatasetSource source(test::sharedData() / "rgbd/bundlefusion_apt0_kf219", dataset);
+  RunOptions options;
+  options.out_dir = test::freshTempDir();
+  const RunSummary summary = runPipeline(source, RunConfig{}, options);
+  ASSERT_GT(summary.loops.loops.optimisations, 0u) << "no correction to follow";
+  EXPECT_TRUE(summary.loops.tsdf_corrected);
+  EXPECT_GT(summary.loops.tsdf_frames_kept, 10u);
+  EXPECT_GT(summary.loops.tsdf_correction_s, 0.0);
+  EXPECT_GT(summary.integration.tsdf_bytes, 10u << 20);
+  EXPECT_GT(summary.exported.mesh_vertices, 10'000u);
+  EXPECT_GE(summary.end_to_end_s, summary.wall_s);
+
+  std::ifstream in(options.out_dir / "report.json");
+  const nlohmann::json report = nlohmann::json::parse(in);
+  EXPECT_EQ(report["tsdf_corrected"], true);
+  EXPECT_EQ(report["mesh_vertices"].get<std::size_t>(), summary.exported.mesh_vertices);
+  EXPECT_EQ(report["tsdf_bytes"].get<std::size_t>(), summary.integration.tsdf_bytes);
+  EXPECT_GT(report["fps_end_to_end"].get<double>(), 0.0);
+}
+
 TEST(Pipeline, RealTumTexturesRenderMoreFaithfullyThanTheMeshOnTrainingAndHeldOutViews) {
   // tum_fr1_rpy_40 at its motion-capture poses, every 5th frame held out: the patches rendered
   // into the captured frames against the run's own vertex-coloured mesh on the same pixels

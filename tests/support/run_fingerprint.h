@@ -54,6 +54,8 @@ inline std::string runFingerprint(const std::filesystem::path& run_dir) {
   nlohmann::json report = nlohmann::json::parse(report_file);
   for (const char* timing : {"wall_s",
                              "fps",
+                             "end_to_end_s",
+                             "fps_end_to_end",
                              "peak_rss_mb",
                              "rss_growth_mb_per_1000_frames",
                              "latency_ms_p50",

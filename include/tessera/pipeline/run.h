@@ -49,6 +49,8 @@ struct RunSummary {
   std::string source;
   double wall_s = 0.0;
   double fps = 0.0;
+  // From the first frame to the map written (the mesh, the exports and the saved map too).
+  double end_to_end_s = 0.0;
   double peak_rss_mb = 0.0;
   StreamFigures stream;
   CpuFigures cpu;

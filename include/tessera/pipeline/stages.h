@@ -188,7 +188,8 @@ class IntegrationStage {
 
   const fusion::TsdfMap& map() const { return map_; }
   // The TSDF's surface, its volume freed (at the end of a run, before the volume is fused again
-  // at corrected poses: the two volumes never hold memory at once).
+  // at corrected poses: the two volumes never hold memory at once). figures() then gives the
+  // TSDF's size as it was.
   fusion::SurfaceMesh takeSurface();
   IntegrationFigures figures() const;
 
@@ -232,6 +233,7 @@ class IntegrationStage {
   int posed_since_integrated_ = 0;
   LoadShedding shedding_;
   IntegrationFigures figures_;  // all but tsdf_bytes, read from the map
+  std::optional<std::size_t> bytes_when_taken_;  // the TSDF's size before takeSurface()
   StageTimer timer_;
 };
 

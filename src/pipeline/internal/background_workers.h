@@ -14,6 +14,9 @@
 
 namespace tessera::pipeline::internal {
 
+// Raises the calling thread's nice value by `nice` (at most to 19; 0: leaves it).
+void lowerOwnPriority(int nice);
+
 class BackgroundWorkers {
  public:
   // `threads` threads, their nice value raised by `nice` (at most to 19) above the creating

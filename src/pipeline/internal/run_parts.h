@@ -7,6 +7,7 @@
 #include <optional>
 #include <vector>
 
+#include "internal/corrected_surface.h"
 #include "internal/run_stages.h"
 #include "internal/saved_map.h"
 #include "tessera/db/texture_store.h"
@@ -41,6 +42,7 @@ struct RunParts {
   DescribeStage describe;
   CommitStage commit;
   std::unique_ptr<MapSaver> map_saver;  // null unless options.save_map
+  CorrectedSurface surface;             // OUT/mesh.ply's
   RunStages stages;  // the graph's view of the stages above
 };
 

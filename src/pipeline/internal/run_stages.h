@@ -11,6 +11,7 @@
 
 namespace tessera::pipeline::internal {
 
+class CorrectedSurface;
 class MapSaver;
 
 // When freed memory goes back to the kernel (PipelineConfig::return_freed_memory_s and
@@ -26,7 +27,7 @@ class RunStages : public FramePath, public PatchPath, public RunReport {
             PlaneStage& planes, const DescribeStage& describe, CommitStage& commit,
             BitmapFiles& bitmaps, StatsSink& sink, loop::LoopCloser* loop_closer,
             RunListener* listener, FreedMemoryReturn freed_memory_return = {},
-            MapSaver* map_saver = nullptr)
+            MapSaver* map_saver = nullptr, CorrectedSurface* surface = nullptr)
       : source_(source),
         tracking_(tracking),
         integration_(integration),
@@ -38,7 +39,8 @@ class RunStages : public FramePath, public PatchPath, public RunReport {
         loop_closer_(loop_closer),
         listener_(listener),
         freed_memory_return_(freed_memory_return),
-        map_saver_(map_saver) {}
+        map_saver_(map_saver),
+        surface_(surface) {}
 
   std::optional<core::Frame> next() override { return source_.next(); }
   TrackedFrame track(core::Frame frame) override;
@@ -49,7 +51,8 @@ class RunStages : public FramePath, public PatchPath, public RunReport {
   FusedFrame closeLoops(FusedFrame fused) override;
   // Also the map's checkpoint, while the plane stage holds still.
   FusedFrame findPlanes(FusedFrame fused) override;
-  // Waits for loop closure's last optimisation, so that the map follows it, then finishes.
+  // Waits for loop closure's last optimisation, so that the map follows it (and the TSDF is
+  // fused again at the corrected poses, beside the end's texturing), then finishes.
   std::vector<planes::PatchEvent> finishStream() override;
   std::vector<planes::PatchSnapshot> snapshots(const std::vector<int>& ids) const override;
 
@@ -91,7 +94,8 @@ class RunStages : public FramePath, public PatchPath, public RunReport {
   // When memory was last returned after a commit, and above the budget (on the frame path).
   SteadyTime freed_memory_returned_at_ = std::chrono::steady_clock::now();
   SteadyTime over_budget_returned_at_ = freed_memory_returned_at_;
-  MapSaver* map_saver_;  // null when the run saves no map
+  MapSaver* map_saver_;        // null when the run saves no map
+  CorrectedSurface* surface_;  // started once loop closure has finished; may be null
 };
 
 }  // namespace tessera::pipeline::internal

@@ -1,0 +1,74 @@
+#include "internal/corrected_surface.h"
+
+#include <chrono>
+
+#include <spdlog/spdlog.h>
+
+#include "internal/background_workers.h"
+#include "tessera/core/error.h"
+
+namespace tessera::pipeline::internal {
+
+void CorrectedSurface::start() {
+  if (fusing_.valid() || corrected_) return;
+  const fusion::ReintegrationLog* log = integration_.reintegrationLog();
+  if (loop_closer_ == nullptr || log == nullptr || log->size() == 0 ||
+      loop_closer_->graph().stats().optimisations == 0) {
+    return;
+  }
+  fusing_ = std::async(std::launch::async, [this] {
+    lowerOwnPriority(nice_);
+    const auto begin = std::chrono::steady_clock::now();
+    Corrected corrected = fuseAgain();
+    corrected.seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - begin).count();
+    return corrected;
+  });
+}
+
+void CorrectedSurface::wait() {
+  if (fusing_.valid()) corrected_ = fusing_.get();
+}
+
+CorrectedSurface::Corrected CorrectedSurface::fuseAgain() const {
+  const fusion::ReintegrationLog& log = *integration_.reintegrationLog();
+  if (!log.usable()) {
+    spdlog::warn("mesh.ply stays at the tracked poses: {}", log.error());
+    return {};
+  }
+  const loop::MapCorrection correction = loop_closer_->graph().correction();
+  // The surface at the tracked poses stays as the fallback; its volume (the run's largest
+  // store) is freed before the second volume is fused.
+  fusion::SurfaceMesh tracked = integration_.takeSurface();
+  try {
+    return {log.rebuild(integration_.map().config(),
+                        [&correction](std::int64_t anchor_ns) -> std::optional<core::Isometry> {
+                          if (!correction.inMap(anchor_ns)) return std::nullopt;  // never joined
+                          return correction.at(anchor_ns);
+                        }),
+            true};
+  } catch (const core::Error& e) {
+    spdlog::warn("mesh.ply stays at the tracked poses: {}", e.what());
+    return {std::move(tracked), false};
+  }
+}
+
+fusion::SurfaceMesh CorrectedSurface::take(LoopFigures& loops) {
+  wait();
+  if (const fusion::ReintegrationLog* log = integration_.reintegrationLog()) {
+    loops.tsdf_frames_kept = log->size();
+    loops.tsdf_frames_kept_bytes = log->diskBytes();
+  }
+  if (!corrected_ || !corrected_->mesh) return integration_.takeSurface();
+  fusion::SurfaceMesh mesh = std::move(*corrected_->mesh);
+  const Corrected done = {std::nullopt, corrected_->fused_again, corrected_->seconds};
+  corrected_.reset();
+  if (!done.fused_again) return mesh;
+  loops.tsdf_corrected = true;
+  loops.tsdf_correction_s = done.seconds;
+  spdlog::info("TSDF fused again at the corrected poses from {} keyframes in {:.1f} s",
+               loops.tsdf_frames_kept, loops.tsdf_correction_s);
+  return mesh;
+}
+
+}  // namespace tessera::pipeline::internal
