@@ -6,6 +6,7 @@
 
 #include "internal/background_workers.h"
 #include "tessera/core/error.h"
+#include "tessera/core/memory.h"
 
 namespace tessera::pipeline::internal {
 
@@ -40,6 +41,9 @@ CorrectedSurface::Corrected CorrectedSurface::fuseAgain() const {
   // The surface at the tracked poses stays as the fallback; its volume (the run's largest
   // store) is freed before the second volume is fused.
   fusion::SurfaceMesh tracked = integration_.takeSurface();
+  // The volume's blocks were freed on the threads that fused them; this thread's allocations
+  // would not reuse them, so they go back to the kernel before the second volume grows.
+  core::returnFreedMemory();
   try {
     return {log.rebuild(integration_.map().config(),
                         [&correction](std::int64_t anchor_ns) -> std::optional<core::Isometry> {
