@@ -39,6 +39,11 @@ void BackgroundWorkers::submit(std::function<void()> job) {
   queued_.notify_one();
 }
 
+bool BackgroundWorkers::failed() {
+  const std::lock_guard lock(mutex_);
+  return first_error_ != nullptr;
+}
+
 void BackgroundWorkers::rethrowFirst() {
   const std::lock_guard lock(mutex_);
   if (first_error_) std::rethrow_exception(first_error_);

@@ -1,6 +1,7 @@
 #include "internal/corrected_surface.h"
 
 #include <chrono>
+#include <exception>
 
 #include <spdlog/spdlog.h>
 
@@ -51,7 +52,7 @@ CorrectedSurface::Corrected CorrectedSurface::fuseAgain() const {
                           return correction.at(anchor_ns);
                         }),
             true};
-  } catch (const core::Error& e) {
+  } catch (const std::exception& e) {  // a kept frame unreadable, or memory short
     spdlog::warn("mesh.ply stays at the tracked poses: {}", e.what());
     return {std::move(tracked), false};
   }

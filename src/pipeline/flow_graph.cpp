@@ -360,9 +360,10 @@ std::size_t runGraph(FramePath& frames, PatchPath& patches, RunReport& report,
                      std::vector<planes::PatchSnapshot> finalized = frames.snapshots(some);
                      queue(jobs.inOpenBatch(finalized), describe_node);
                    });
+    // A job that failed leaves the commits behind it waiting: the run ends with its error.
     do {
       graph.wait_for_all();  // the retirements too, when nothing was finalized
-    } while (end_feed.handMore());
+    } while (!describers.failed() && !committer.failed() && end_feed.handMore());
   });
   describers.rethrowFirst();
   committer.rethrowFirst();

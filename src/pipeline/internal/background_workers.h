@@ -30,6 +30,8 @@ class BackgroundWorkers {
   void submit(std::function<void()> job);
   // Rethrows the first exception a job threw, if any.
   void rethrowFirst();
+  // Whether a job threw.
+  bool failed();
   // Starts threads, at the same nice value, until there are `threads` (never fewer than now).
   void growTo(int threads);
 
