@@ -2,6 +2,7 @@
 
 #include <chrono>
 #include <exception>
+#include <utility>
 
 #include <spdlog/spdlog.h>
 
@@ -64,16 +65,14 @@ fusion::SurfaceMesh CorrectedSurface::take(LoopFigures& loops) {
     loops.tsdf_frames_kept = log->size();
     loops.tsdf_frames_kept_bytes = log->diskBytes();
   }
-  if (!corrected_ || !corrected_->mesh) return integration_.takeSurface();
-  fusion::SurfaceMesh mesh = std::move(*corrected_->mesh);
-  const Corrected done = {std::nullopt, corrected_->fused_again, corrected_->seconds};
-  corrected_.reset();
-  if (!done.fused_again) return mesh;
+  std::optional<Corrected> corrected = std::exchange(corrected_, std::nullopt);
+  if (!corrected || !corrected->mesh) return integration_.takeSurface();
+  if (!corrected->fused_again) return std::move(*corrected->mesh);
   loops.tsdf_corrected = true;
-  loops.tsdf_correction_s = done.seconds;
+  loops.tsdf_correction_s = corrected->seconds;
   spdlog::info("TSDF fused again at the corrected poses from {} keyframes in {:.1f} s",
                loops.tsdf_frames_kept, loops.tsdf_correction_s);
-  return mesh;
+  return std::move(*corrected->mesh);
 }
 
 }  // namespace tessera::pipeline::internal
